@@ -1,0 +1,72 @@
+# physanim: `make pipeline` runs the face pipeline on the demo dataset; `make test` runs the tests.
+# Both create .venv and install the project on first use (from python3 and the package indexes).
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+PHYSANIM := $(VENV)/bin/physanim
+DATASET ?= demo
+CONFIG ?=
+STAGE ?=
+PIPELINE ?= face
+ARGS ?=
+CONFIG_ARGS := $(foreach c,$(CONFIG),-c $(c))
+
+# Debian packages the Python wheels need at run time: open3d (libusb, libgomp), VTK offscreen
+# rendering through EGL (libegl1, libgl1), OpenCV video (nothing extra).
+DEB_PACKAGES := libusb-1.0-0 libgomp1 libgl1 libegl1 libglib2.0-0
+
+.PHONY: help setup setup-system system-check pipeline stage status dag demo test bench lint format clean-store
+
+help:
+	@echo "make pipeline [DATASET=demo] [CONFIG=configs/x.yaml] - run the face pipeline"
+	@echo "make stage STAGE=name                              - (re)run one stage"
+	@echo "make status | dag | demo | test | bench | lint | setup-system"
+
+$(VENV)/.installed: pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	@touch $@
+
+setup: $(VENV)/.installed system-check
+
+# Installs the Debian packages (needs root or sudo); .ci/run calls it.
+setup-system:
+	@if [ "$$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi; \
+	$$SUDO apt-get update -qq && \
+	DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $(DEB_PACKAGES) >/dev/null
+
+# Runs setup-system only when a needed shared library is missing.
+system-check:
+	@missing=0; for lib in libusb-1.0.so.0 libgomp.so.1 libEGL.so.1 libGL.so.1; do \
+	  ldconfig -p | grep -q "$$lib" || missing=1; done; \
+	if [ $$missing = 1 ]; then echo "installing Debian packages: $(DEB_PACKAGES)"; \
+	  $(MAKE) --no-print-directory setup-system; fi
+
+pipeline: setup
+	$(PHYSANIM) run -p $(PIPELINE) --dataset $(DATASET) $(CONFIG_ARGS) $(ARGS)
+
+stage: setup
+	@test -n "$(STAGE)" || { echo "usage: make stage STAGE=<name> (see make dag)"; exit 2; }
+	$(PHYSANIM) run -p $(PIPELINE) --dataset $(DATASET) $(CONFIG_ARGS) --only $(STAGE) $(ARGS)
+
+status: setup
+	$(PHYSANIM) status -p $(PIPELINE) --dataset $(DATASET) $(CONFIG_ARGS) $(ARGS)
+
+dag: setup
+	$(PHYSANIM) dag -p $(PIPELINE) $(ARGS)
+
+test: setup
+	$(PY) -m pytest -q $(ARGS)
+
+bench: setup
+	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+lint: setup
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+format: setup
+	$(VENV)/bin/ruff format .
+	$(VENV)/bin/ruff check --fix .

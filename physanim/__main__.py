@@ -1,0 +1,5 @@
+"""``python -m physanim`` runs the CLI."""
+
+from physanim.cli import main
+
+main()

@@ -1,0 +1,282 @@
+"""The ``physanim`` command line: run, status, dag, show, clean.
+
+The CLI is the application's entry point: it loads the DAG declarations from ``tasks/`` and,
+for ``run``, the Prefect flow from ``flows/`` (imported lazily, so ``status``, ``dag``, ``show``
+and ``clean`` never need Prefect).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from pydantic import BaseModel
+from rich.console import Console
+from rich.table import Table
+
+from physanim.config import ConfigError, load_config
+from physanim.pipeline import Pipeline, PlanEntry, StageResult, make_plan
+from physanim.store import StageOutputMissing, StageStore
+
+app = typer.Typer(
+    add_completion=False, no_args_is_help=True, help=__doc__, pretty_exceptions_enable=False
+)
+console = Console(stderr=True)
+
+PipelineOpt = Annotated[
+    str, typer.Option("--pipeline", "-p", help="DAG: face, ..., or package.module:ATTRIBUTE")
+]
+ConfigOpt = Annotated[
+    list[Path] | None,
+    typer.Option("--config", "-c", help="extra YAML config merged over the default (repeatable)"),
+]
+SetOpt = Annotated[
+    list[str] | None,
+    typer.Option("--set", "-s", help="override one value: dotted.key=value (repeatable)"),
+]
+DatasetOpt = Annotated[
+    str | None, typer.Option("--dataset", "-d", help="dataset name (data/<name>) or directory")
+]
+OnlyOpt = Annotated[str | None, typer.Option("--only", help="run just this stage")]
+FromOpt = Annotated[str | None, typer.Option("--from", help="run this stage and its downstream")]
+ForceOpt = Annotated[
+    list[str] | None, typer.Option("--force", help="recompute this stage even if cached")
+]
+
+
+def _pipeline(name: str) -> Pipeline:
+    """A pipeline by name (``face``...) or by import path ``package.module:ATTRIBUTE``."""
+    if ":" in name:
+        module, attr = name.split(":", 1)
+        return getattr(importlib.import_module(module), attr)
+    from tasks.pipelines import PIPELINES
+
+    if name not in PIPELINES:
+        raise typer.BadParameter(f"unknown pipeline {name!r}; known: {', '.join(PIPELINES)}")
+    return PIPELINES[name]
+
+
+def _dataset_overrides(dataset: str | None) -> list[str]:
+    if dataset is None:
+        return []
+    p = Path(dataset)
+    if len(p.parts) > 1 or p.is_absolute():
+        return [f"dataset.name={p.name}", f"dataset.dir={p}"]
+    return [f"dataset.name={dataset}"]
+
+
+def load(
+    pipeline: Pipeline, configs: list[Path] | None, sets: list[str] | None, dataset: str | None
+) -> BaseModel:
+    """Validated config of ``pipeline``: default file, ``-c`` files, dataset, ``--set``."""
+    files = [pipeline.default_config, *(configs or [])]
+    overrides = _dataset_overrides(dataset) + list(sets or [])
+    try:
+        config, _ = load_config(pipeline.config_model(), files, overrides)
+    except ConfigError as exc:
+        console.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    return config
+
+
+def _plan(
+    pipeline: Pipeline,
+    config: BaseModel,
+    only: str | None,
+    start: str | None,
+    force: list[str] | None,
+) -> tuple[StageStore, list[PlanEntry]]:
+    store = StageStore(config.dataset.store_path)  # type: ignore[attr-defined]
+    try:
+        entries = make_plan(pipeline, config, store, only=only, start=start, force=force or ())
+    except ValueError as exc:
+        console.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    return store, entries
+
+
+def _plan_table(entries: list[PlanEntry]) -> Table:
+    table = Table(title="plan")
+    for col in ("stage", "key", "action", "why"):
+        table.add_column(col)
+    colour = {"cached": "green", "run": "yellow", "skip": "dim"}
+    for e in entries:
+        action = "will run" if e.action == "run" else e.action
+        table.add_row(e.stage, e.key[:12], f"[{colour[e.action]}]{action}", e.reason)
+    return table
+
+
+def _log_result(r: StageResult) -> None:
+    if r.action == "cached":
+        console.print(f"[green]{r.stage}[/green]: cached ({r.key[:12]})")
+    else:
+        console.print(f"[yellow]{r.stage}[/yellow]: ran in {r.seconds:.2f} s ({r.key[:12]})")
+
+
+@app.command()
+def run(
+    pipeline: PipelineOpt = "face",
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    dataset: DatasetOpt = None,
+    only: OnlyOpt = None,
+    start: FromOpt = None,
+    force: ForceOpt = None,
+    local: Annotated[
+        bool, typer.Option("--local", help="run stages in this process without Prefect")
+    ] = False,
+) -> None:
+    """Run the DAG (or part of it); cached stages are reused."""
+    t0 = time.perf_counter()
+    dag = _pipeline(pipeline)
+    cfg = load(dag, config, set_, dataset)
+    store, entries = _plan(dag, cfg, only, start, force)
+    for stale in store.remove_stale_temporaries():
+        console.print(f"removed abandoned partial output {stale.name}")
+    todo = [e for e in entries if e.action == "run"]
+    from physanim.pipeline import execute_plan_locally
+    from physanim.pipeline.progress import rich_progress
+
+    if not todo or local:
+        with rich_progress(console) as progress:
+            execute_plan_locally(dag, cfg, entries, progress, on_result=_log_result)
+    else:
+        from flows.prefect_env import configure
+
+        configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
+        from flows.pipeline_flow import pipeline_flow
+
+        for e in entries:
+            if e.action == "cached":
+                store.set_latest(e.stage, e.key)
+                _log_result(StageResult(e.stage, e.key, "cached", 0.0, {}))
+        with rich_progress(console) as progress:
+            for r in pipeline_flow(dag, cfg, entries, progress):
+                _log_result(r)
+    console.print(
+        f"{pipeline}: {len(todo)} stage(s) ran, {len(entries) - len(todo)} cached/skipped, "
+        f"{time.perf_counter() - t0:.1f} s; store {store.root}"
+    )
+
+
+@app.command()
+def status(
+    pipeline: PipelineOpt = "face",
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    dataset: DatasetOpt = None,
+    only: OnlyOpt = None,
+    start: FromOpt = None,
+    force: ForceOpt = None,
+    as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False,
+) -> None:
+    """Dry run: for each stage, cached or will-run, and why."""
+    dag = _pipeline(pipeline)
+    cfg = load(dag, config, set_, dataset)
+    _, entries = _plan(dag, cfg, only, start, force)
+    if as_json:
+        rows = [
+            {"stage": e.stage, "key": e.key, "action": e.action, "why": e.reason} for e in entries
+        ]
+        print(json.dumps(rows, indent=2))
+    else:
+        Console().print(_plan_table(entries))
+
+
+@app.command()
+def dag(
+    pipeline: PipelineOpt = "face",
+    fmt: Annotated[str, typer.Option("--format", "-f", help="text, mermaid or dot")] = "text",
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="write to file")] = None,
+) -> None:
+    """Print the DAG (text), or write it as Mermaid or Graphviz text."""
+    d = _pipeline(pipeline)
+    if fmt == "mermaid":
+        text = d.mermaid()
+    elif fmt == "dot":
+        text = d.dot()
+    elif fmt == "text":
+        text = "".join(
+            f"{s.name} (v{s.version})"
+            + (f" <- {', '.join(s.upstream)}" if s.upstream else "")
+            + (f": {s.doc}" if s.doc else "")
+            + "\n"
+            for s in d.stages
+        )
+    else:
+        raise typer.BadParameter(f"--format must be text, mermaid or dot, not {fmt!r}")
+    if output:
+        output.write_text(text)
+        console.print(f"wrote {output}")
+    else:
+        print(text, end="")
+
+
+@app.command()
+def show(
+    stage: Annotated[str, typer.Argument(help="stage name")],
+    key: Annotated[str | None, typer.Option(help="output key (default: latest)")] = None,
+    pipeline: PipelineOpt = "face",
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    dataset: DatasetOpt = None,
+) -> None:
+    """Provenance of a stage's latest (or given) output, and the arrays it holds."""
+    d = _pipeline(pipeline)
+    d.stage(stage)
+    cfg = load(d, config, set_, dataset)
+    store = StageStore(cfg.dataset.store_path)  # type: ignore[attr-defined]
+    if key is not None:
+        matches = [k for k in store.keys(stage) if k.startswith(key)]
+        if len(matches) != 1:
+            console.print(f"[red]error:[/red] key prefix {key!r} matches {len(matches)} outputs")
+            raise typer.Exit(2)
+        key = matches[0]
+    try:
+        group = store.open(stage, key)
+    except StageOutputMissing as exc:
+        console.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(1) from None
+    info = dict(group.attrs)
+    info["arrays"] = {
+        name: f"{a.shape} {a.dtype}" for name, a in sorted(group.arrays(), key=lambda x: x[0])
+    }
+    info["variants"] = store.keys(stage)
+    print(json.dumps(info, indent=2, default=str))
+
+
+@app.command()
+def clean(
+    pipeline: PipelineOpt = "face",
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    dataset: DatasetOpt = None,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="list only")] = False,
+) -> None:
+    """Remove outputs that neither this config nor any stage's latest pointer reaches."""
+    d = _pipeline(pipeline)
+    cfg = load(d, config, set_, dataset)
+    store, entries = _plan(d, cfg, None, None, None)
+    keep = {(e.stage, e.key) for e in entries}
+    doomed = store.unreachable(keep)
+    for stage, key in doomed:
+        print(f"{'would remove' if dry_run else 'removing'} {stage}/{key[:12]}")
+        if not dry_run:
+            store.remove(stage, key)
+    stale = store.stale_temporaries()
+    for p in stale:
+        print(f"{'would remove' if dry_run else 'removing'} partial output {p.name}")
+    if not dry_run:
+        store.remove_stale_temporaries()
+    if not doomed and not stale:
+        print("nothing to clean")
+
+
+def main() -> None:
+    """Console-script entry point."""
+    sys.exit(app())

@@ -1,0 +1,177 @@
+"""Load YAML config files, merge them with overrides and validate them with pydantic.
+
+Merge order (later wins, key by key): the base file (``configs/default.yaml``), then each
+``-c FILE`` in the order given, then each ``--set dotted.key=value``.  Every leaf remembers the
+file (or ``--set``) it came from, so a validation error names the file, the dotted key and the
+allowed range.
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+M = TypeVar("M", bound=BaseModel)
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that also reads ``1e-3`` as a float (PyYAML's YAML 1.1 wants ``1.0e-3``)."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+        |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+        |\.[0-9_]+(?:[eE][-+][0-9]+)?
+        |[-+]?\.(?:inf|Inf|INF)
+        |\.(?:nan|NaN|NAN))$""",
+        re.X,
+    ),
+    list("-+0123456789."),
+)
+
+
+def _yaml(text: str):
+    return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+
+
+class ConfigError(ValueError):
+    """A config file or override is missing, malformed or invalid; the message says where."""
+
+
+def load_yaml(path: str | Path) -> dict[str, Any]:
+    """Read one YAML mapping; clear errors for a missing file, bad YAML or a non-mapping."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: config file not found (check the path given to -c/--config)")
+    try:
+        data = _yaml(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(
+            f"{path}: top level must be a mapping of sections, got {type(data).__name__}"
+        )
+    return data
+
+
+def _merge(
+    base: dict[str, Any], over: Mapping[str, Any], source: str, origins: dict[str, str], prefix=""
+) -> None:
+    for k, v in over.items():
+        dotted = f"{prefix}{k}"
+        if isinstance(v, Mapping) and isinstance(base.get(k), dict):
+            _merge(base[k], v, source, origins, dotted + ".")
+        else:
+            base[k] = copy.deepcopy(v)
+            for o in [o for o in origins if o.startswith(dotted + ".")]:
+                del origins[o]
+            origins[dotted] = source
+            if isinstance(v, Mapping):
+                _record(v, source, origins, dotted + ".")
+
+
+def _record(tree: Mapping[str, Any], source: str, origins: dict[str, str], prefix: str) -> None:
+    for k, v in tree.items():
+        origins[f"{prefix}{k}"] = source
+        if isinstance(v, Mapping):
+            _record(v, source, origins, f"{prefix}{k}.")
+
+
+def parse_override(text: str) -> dict[str, Any]:
+    """Turn ``"simulate.dt=0.001"`` into ``{"simulate": {"dt": 0.001}}`` (value parsed as YAML)."""
+    if "=" not in text:
+        raise ConfigError(f"--set {text!r}: expected dotted.key=value, e.g. simulate.dt=0.001")
+    key, raw = text.split("=", 1)
+    parts = key.strip().split(".")
+    if not all(p.isidentifier() for p in parts):
+        raise ConfigError(f"--set {text!r}: {key!r} is not a dotted key like simulate.dt")
+    try:
+        value = _yaml(raw) if raw.strip() else ""
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"--set {text!r}: value is not valid YAML: {exc}") from exc
+    tree: dict[str, Any] = {parts[-1]: value}
+    for p in reversed(parts[:-1]):
+        tree = {p: tree}
+    return tree
+
+
+def merge_sources(
+    files: Iterable[str | Path], overrides: Iterable[str] = ()
+) -> tuple[dict[str, Any], dict[str, str]]:
+    """Merge files then overrides; returns (raw tree, origin of each dotted key)."""
+    tree: dict[str, Any] = {}
+    origins: dict[str, str] = {}
+    for f in files:
+        _merge(tree, load_yaml(f), str(f), origins)
+    for o in overrides:
+        _merge(tree, parse_override(o), f"--set {o}", origins)
+    return tree, origins
+
+
+def _origin(dotted: str, origins: Mapping[str, str]) -> str:
+    parts = dotted.split(".")
+    for n in range(len(parts), 0, -1):
+        if ".".join(parts[:n]) in origins:
+            return origins[".".join(parts[:n])]
+    return "(defaults)"
+
+
+def _allowed(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str]:
+    """Field names accepted at the parent of ``loc`` (for unknown-key messages)."""
+    current: Any = model
+    for part in loc[:-1]:
+        fields = getattr(current, "model_fields", None)
+        if not fields or part not in fields:
+            return []
+        current = fields[part].annotation
+    fields = getattr(current, "model_fields", None)
+    return sorted(fields) if fields else []
+
+
+def _describe(err: Mapping[str, Any], model: type[BaseModel]) -> str:
+    kind, ctx, got = err["type"], err.get("ctx", {}), err.get("input")
+    bounds = {
+        "greater_than": ">",
+        "greater_than_equal": ">=",
+        "less_than": "<",
+        "less_than_equal": "<=",
+    }
+    if kind == "extra_forbidden":
+        allowed = _allowed(model, tuple(err["loc"]))
+        return "unknown key" + (f"; allowed keys here: {', '.join(allowed)}" if allowed else "")
+    if kind in bounds:
+        (limit,) = ctx.values()
+        return f"must be {bounds[kind]} {limit} (got {got!r})"
+    if kind == "missing":
+        return "required key is missing"
+    return f"{err['msg']} (got {got!r})"
+
+
+def validate(model: type[M], tree: Mapping[str, Any], origins: Mapping[str, str]) -> M:
+    """Validate a merged tree; raise ConfigError listing every problem with file and dotted key."""
+    try:
+        return model.model_validate(tree)
+    except ValidationError as exc:
+        lines = []
+        for err in exc.errors():
+            dotted = ".".join(str(p) for p in err["loc"])
+            lines.append(f"{_origin(dotted, origins)}: {dotted}: {_describe(err, model)}")
+        raise ConfigError("invalid config:\n  " + "\n  ".join(lines)) from None
+
+
+def load_config(
+    model: type[M], files: Iterable[str | Path], overrides: Iterable[str] = ()
+) -> tuple[M, dict[str, str]]:
+    """Merge ``files`` and ``overrides`` (in that order) and validate against ``model``."""
+    tree, origins = merge_sources(files, overrides)
+    return validate(model, tree, origins), origins

@@ -1,0 +1,20 @@
+"""Stage registry types, planning (status) and execution of stage DAGs; never imports Prefect."""
+
+from physanim.pipeline.context import ProgressFactory, ProgressFn, StageContext
+from physanim.pipeline.plan import PlanEntry, make_plan
+from physanim.pipeline.runner import StageResult, execute_plan_locally, execute_stage
+from physanim.pipeline.spec import DatasetParams, Pipeline, StageSpec
+
+__all__ = [
+    "DatasetParams",
+    "PlanEntry",
+    "Pipeline",
+    "ProgressFactory",
+    "ProgressFn",
+    "StageContext",
+    "StageResult",
+    "StageSpec",
+    "execute_plan_locally",
+    "execute_stage",
+    "make_plan",
+]

@@ -1,0 +1,57 @@
+"""What a stage's compute function sees: its params, its inputs and the group it writes to."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import zarr
+from pydantic import BaseModel
+
+from physanim.pipeline.spec import DatasetParams, StageSpec
+from physanim.store import StageStore, write_array
+
+#: progress callback passed to library loops: (done, total) -> None
+ProgressFn = Callable[[int, int], None]
+ProgressFactory = Callable[[str], ProgressFn]
+
+
+def _no_progress(_description: str) -> ProgressFn:
+    return lambda done, total: None
+
+
+@dataclass
+class StageContext:
+    """Inputs and outputs of one stage execution.
+
+    ``out`` is the (temporary) Zarr group of this output; it becomes visible to readers only
+    after ``compute`` returns.  ``config`` is the whole validated config (read-only), for the
+    rare stage that needs another section (e.g. dataset paths).
+    """
+
+    spec: StageSpec
+    params: BaseModel
+    key: str
+    upstream: Mapping[str, str]
+    store: StageStore
+    dataset: DatasetParams
+    out: zarr.Group
+    progress: ProgressFactory = field(default=_no_progress)
+    summary: dict[str, object] = field(default_factory=dict)
+
+    def input(self, stage: str) -> zarr.Group:
+        """The output group of upstream ``stage`` (read-only)."""
+        if stage not in self.upstream:
+            raise KeyError(f"stage {self.spec.name} does not declare {stage!r} as upstream")
+        return self.store.open(stage, self.upstream[stage])
+
+    def write(self, name: str, data: np.ndarray) -> zarr.Array:
+        """Write one array of this output, chunked by frames."""
+        return write_array(self.out, name, data)
+
+    @property
+    def dataset_dir(self) -> Path:
+        """The dataset directory."""
+        return self.dataset.path

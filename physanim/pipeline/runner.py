@@ -1,0 +1,98 @@
+"""Execute planned stages: compute into a temporary group, commit atomically, point latest."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import BaseModel
+
+from physanim.pipeline.context import ProgressFactory, StageContext, _no_progress
+from physanim.pipeline.plan import PlanEntry
+from physanim.pipeline.spec import Pipeline
+from physanim.store import StageStore
+
+
+@dataclass(frozen=True)
+class StageResult:
+    """Outcome of one stage in a run: ``ran`` or ``cached``, with its wall time in seconds."""
+
+    stage: str
+    key: str
+    action: str
+    seconds: float
+    summary: Mapping[str, Any]
+
+
+def execute_stage(
+    pipeline: Pipeline,
+    config: BaseModel | Mapping[str, Any],
+    entry: PlanEntry,
+    progress: ProgressFactory | None = None,
+) -> StageResult:
+    """Run one planned stage and commit its output (``config`` may be a plain dict: workers).
+
+    If the output appeared meanwhile (another worker), nothing is recomputed.
+    """
+    if not isinstance(config, BaseModel):
+        config = pipeline.config_model().model_validate(config)
+    spec = pipeline.stage(entry.stage)
+    dataset = config.dataset  # type: ignore[attr-defined]
+    store = StageStore(dataset.store_path)
+    t0 = time.perf_counter()
+    if store.has(spec.name, entry.key):
+        if not entry.forced:
+            store.set_latest(spec.name, entry.key)
+            return StageResult(spec.name, entry.key, "cached", 0.0, {})
+        store.remove(spec.name, entry.key)
+    params = getattr(config, spec.name)
+    provenance = {
+        "version": spec.version,
+        "params": params.model_dump(mode="json"),
+        "key_params": dict(entry.params),
+        "upstream": dict(entry.upstream),
+        "pipeline": pipeline.name,
+    }
+    with store.writing(spec.name, entry.key, provenance) as group:
+        ctx = StageContext(
+            spec=spec,
+            params=params,
+            key=entry.key,
+            upstream=entry.upstream,
+            store=store,
+            dataset=dataset,
+            out=group,
+            progress=progress or _no_progress,
+        )
+        spec.compute(ctx)
+        if ctx.summary:
+            group.attrs["summary"] = ctx.summary
+    store.set_latest(spec.name, entry.key)
+    return StageResult(spec.name, entry.key, "ran", time.perf_counter() - t0, ctx.summary)
+
+
+def execute_plan_locally(
+    pipeline: Pipeline,
+    config: BaseModel,
+    entries: list[PlanEntry],
+    progress: ProgressFactory | None = None,
+    on_result: Callable[[StageResult], None] | None = None,
+) -> list[StageResult]:
+    """Run a plan in this process, in order, without Prefect (tests, debugging, ``--local``)."""
+    store = StageStore(config.dataset.store_path)  # type: ignore[attr-defined]
+    store.remove_stale_temporaries()
+    results = []
+    for e in entries:
+        if e.action == "skip":
+            continue
+        if e.action == "cached":
+            store.set_latest(e.stage, e.key)
+            r = StageResult(e.stage, e.key, "cached", 0.0, {})
+        else:
+            r = execute_stage(pipeline, config, e, progress)
+        results.append(r)
+        if on_result:
+            on_result(r)
+    return results

@@ -1,0 +1,44 @@
+"""Content keys of stage outputs: sha256 over the stage's identity, params and upstream keys."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Mapping
+from typing import Any
+
+
+def canonical_json(value: Any) -> str:
+    """Serialise ``value`` to JSON with sorted keys and no whitespace, so equal values hash equally.
+
+    Floats are written by ``repr`` (shortest round-trip form), so ``0.1`` and ``1e-1`` agree;
+    NaN and infinities are refused because they have no canonical JSON form.
+    """
+
+    def check(v: Any) -> None:
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ValueError(f"cannot hash non-finite float {v!r} in stage params")
+        if isinstance(v, Mapping):
+            for item in v.values():
+                check(item)
+        elif isinstance(v, list | tuple):
+            for item in v:
+                check(item)
+
+    check(value)
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+
+
+def stage_key(
+    stage: str, version: str, params: Mapping[str, Any], upstream: Mapping[str, str]
+) -> str:
+    """Key of a stage output: sha256 hex of (stage name, code version, params, upstream keys).
+
+    ``params`` is the validated, JSON-able parameter dict (plus any input fingerprint);
+    ``upstream`` maps each upstream stage name to its output key.
+    """
+    payload = canonical_json(
+        {"stage": stage, "version": version, "params": dict(params), "upstream": dict(upstream)}
+    )
+    return hashlib.sha256(payload.encode("ascii")).hexdigest()

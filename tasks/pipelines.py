@@ -1,0 +1,17 @@
+"""The DAGs, declared once: they drive the CLI (run, status, dag), the Prefect flows and reports.
+
+Each stage lives in ``tasks/<stage>.py`` (its StageSpec: name, upstream, params model, code
+version, compute function).  Stages that are not implemented yet are simply absent.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from physanim.pipeline import Pipeline
+
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+
+FACE = Pipeline(name="face", stages=(), default_config=CONFIGS / "default.yaml")
+
+PIPELINES: dict[str, Pipeline] = {p.name: p for p in (FACE,)}

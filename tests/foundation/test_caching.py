@@ -1,0 +1,81 @@
+"""Caching semantics of the stage runner on the toy DAG: what re-runs after which edit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physanim.config import load_config
+from physanim.pipeline import Pipeline, execute_plan_locally, make_plan
+from physanim.store import StageStore
+from tests.foundation.toy_stages import toy_pipeline
+from tests.foundation.toy_stages import executions as ran
+
+
+def run(pipe: Pipeline, cfg_file: Path, *sets: str, **sel) -> tuple[list[str], list[str]]:
+    """Plan then execute; returns (stages the plan said would run, stages actually computed)."""
+    config, _ = load_config(pipe.config_model(), [cfg_file], list(sets))
+    store = StageStore(config.dataset.store_path)
+    plan = make_plan(pipe, config, store, **sel)
+    execute_plan_locally(pipe, config, plan)
+    return [e.stage for e in plan if e.action == "run"], ran(cfg_file.parent)
+
+
+def test_nothing_changed_reruns_nothing(toy_config: Path) -> None:
+    pipe = toy_pipeline(toy_config)
+    assert run(pipe, toy_config) == (["source", "scale", "total"],) * 2
+    assert run(pipe, toy_config) == ([], [])
+
+
+def test_param_edit_reruns_stage_and_downstream_only(toy_config: Path) -> None:
+    pipe = toy_pipeline(toy_config)
+    run(pipe, toy_config)
+    planned, computed = run(pipe, toy_config, "scale.factor=3")
+    assert planned == computed == ["scale", "total"]
+    planned, computed = run(pipe, toy_config, "scale.factor=3", "source.n_frames=4")
+    assert planned == computed == ["source", "scale", "total"]
+
+
+def test_code_version_bump_reruns(toy_config: Path) -> None:
+    run(toy_pipeline(toy_config), toy_config)
+    planned, computed = run(toy_pipeline(toy_config, scale_version="2"), toy_config)
+    assert planned == computed == ["scale", "total"]
+    config, _ = load_config(toy_pipeline(toy_config).config_model(), [toy_config])
+    store = StageStore(config.dataset.store_path)
+    plan = make_plan(toy_pipeline(toy_config, "3"), config, store)
+    assert "code version 2 -> 3" in plan[1].reason
+
+
+def test_variants_coexist_and_both_read(toy_config: Path) -> None:
+    pipe = toy_pipeline(toy_config)
+    run(pipe, toy_config, "scale.factor=2")
+    run(pipe, toy_config, "scale.factor=5")
+    config, _ = load_config(pipe.config_model(), [toy_config])
+    store = StageStore(config.dataset.store_path)
+    keys = store.keys("total")
+    assert len(keys) == 2 and len(store.keys("source")) == 1
+    totals = sorted(float(store.open("total", k)["total"][0]) for k in keys)
+    base = sum(np.arange(1000.0).sum() + 1000 * i for i in range(8))
+    assert totals == pytest.approx([2 * base, 5 * base])
+    assert float(store.open("total")["total"][0]) == pytest.approx(5 * base)  # latest
+    # going back to the first variant is a pure cache hit that moves the latest pointer
+    assert run(pipe, toy_config, "scale.factor=2") == ([], [])
+    assert float(store.open("total")["total"][0]) == pytest.approx(2 * base)
+
+
+def test_status_matches_run_for_selections(toy_config: Path) -> None:
+    pipe = toy_pipeline(toy_config)
+    run(pipe, toy_config)
+    assert run(pipe, toy_config, only="scale") == ([], [])
+    assert run(pipe, toy_config, force=["scale"]) == (["scale", "total"],) * 2
+    assert run(pipe, toy_config, start="total", force=["total"]) == (["total"], ["total"])
+    planned, computed = run(pipe, toy_config, "scale.factor=7", only="scale")
+    assert planned == computed == ["scale"]
+
+
+def test_only_refuses_when_upstream_missing(toy_config: Path) -> None:
+    pipe = toy_pipeline(toy_config)
+    with pytest.raises(ValueError, match="needs source"):
+        run(pipe, toy_config, only="scale")
