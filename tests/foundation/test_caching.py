@@ -10,8 +10,8 @@ import pytest
 from physanim.config import load_config
 from physanim.pipeline import Pipeline, execute_plan_locally, make_plan
 from physanim.store import StageStore
-from tests.foundation.toy_stages import toy_pipeline
 from tests.foundation.toy_stages import executions as ran
+from tests.foundation.toy_stages import toy_pipeline
 
 
 def run(pipe: Pipeline, cfg_file: Path, *sets: str, **sel) -> tuple[list[str], list[str]]:

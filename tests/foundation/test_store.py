@@ -67,7 +67,9 @@ def test_sigkill_mid_write_leaves_nothing_complete_and_next_run_recomputes(
     np.testing.assert_array_equal(ramp[:, 0], np.arange(20.0))
 
 
-def test_two_processes_same_key_end_with_one_complete_copy(toy_config: Path, tmp_path: Path) -> None:
+def test_two_processes_same_key_end_with_one_complete_copy(
+    toy_config: Path, tmp_path: Path
+) -> None:
     env = {"PHYSANIM_TOY_LOG": str(tmp_path / "executions.log")}
     args = ["run", "-p", TOY, "-c", str(toy_config), "--set", "source.slow_s=0.02", "--local"]
     procs = [cli(*args, env=env) for _ in range(2)]
