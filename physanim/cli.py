@@ -7,7 +7,6 @@ and ``clean`` never need Prefect).
 
 from __future__ import annotations
 
-import importlib
 import json
 import sys
 import time
@@ -21,6 +20,7 @@ from rich.table import Table
 
 from physanim.config import ConfigError, load_config
 from physanim.pipeline import Pipeline, PlanEntry, StageResult, make_plan
+from physanim.pipeline.spec import dataset_overrides
 from physanim.store import StageOutputMissing, StageStore
 
 app = typer.Typer(
@@ -50,24 +50,12 @@ ForceOpt = Annotated[
 
 
 def _pipeline(name: str) -> Pipeline:
-    """A pipeline by name (``face``...) or by import path ``package.module:ATTRIBUTE``."""
-    if ":" in name:
-        module, attr = name.split(":", 1)
-        return getattr(importlib.import_module(module), attr)
-    from tasks.pipelines import PIPELINES
+    from tasks.pipelines import get_pipeline
 
-    if name not in PIPELINES:
-        raise typer.BadParameter(f"unknown pipeline {name!r}; known: {', '.join(PIPELINES)}")
-    return PIPELINES[name]
-
-
-def _dataset_overrides(dataset: str | None) -> list[str]:
-    if dataset is None:
-        return []
-    p = Path(dataset)
-    if len(p.parts) > 1 or p.is_absolute():
-        return [f"dataset.name={p.name}", f"dataset.dir={p}"]
-    return [f"dataset.name={dataset}"]
+    try:
+        return get_pipeline(name)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
 
 
 def load(
@@ -75,7 +63,7 @@ def load(
 ) -> BaseModel:
     """Validated config of ``pipeline``: default file, ``-c`` files, dataset, ``--set``."""
     files = [pipeline.default_config, *(configs or [])]
-    overrides = _dataset_overrides(dataset) + list(sets or [])
+    overrides = (dataset_overrides(dataset) if dataset else []) + list(sets or [])
     try:
         config, _ = load_config(pipeline.config_model(), files, overrides)
     except ConfigError as exc:
@@ -275,6 +263,47 @@ def clean(
         store.remove_stale_temporaries()
     if not doomed and not stale:
         print("nothing to clean")
+
+
+@app.command()
+def sweep(
+    file: Annotated[Path, typer.Argument(help="sweep YAML, e.g. configs/sweeps/models.yaml")],
+    dask_address: Annotated[
+        str | None, typer.Option(help="existing Dask scheduler, e.g. tcp://host:8786")
+    ] = None,
+    workers: Annotated[int, typer.Option(min=1, help="local Dask workers")] = 2,
+    serial: Annotated[bool, typer.Option(help="no Dask: one job after another here")] = False,
+) -> None:
+    """Run a parameter sweep; stages shared between variants are computed once."""
+    from physanim.pipeline.sweep import load_sweep
+
+    try:
+        spec, variants = load_sweep(file)
+        pipeline = _pipeline(spec.pipeline)
+        cfg = load(
+            pipeline, list(map(Path, variants[0].configs)), list(variants[0].overrides), None
+        )
+    except ConfigError as exc:
+        console.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    from flows.prefect_env import configure
+
+    configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
+    from flows.sweep import run_sweep
+
+    outcome = run_sweep(file, dask_address=dask_address, workers=workers, serial=serial)
+    for r in outcome.results:
+        _log_result(r)
+    table = Table(
+        title=f"sweep {file.name}: {len(outcome.results)} stage run(s), {outcome.seconds:.1f} s"
+    )
+    stages = [s.name for s in pipeline.stages]
+    for col in ("variant", *stages):
+        table.add_column(col)
+    for name, keys in outcome.variants.items():
+        table.add_row(name, *(keys[s][:8] for s in stages))
+    Console().print(table)
+    console.print(f"summary: {outcome.summary_path}")
 
 
 def main() -> None:

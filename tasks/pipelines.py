@@ -6,6 +6,7 @@ version, compute function).  Stages that are not implemented yet are simply abse
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 
 from physanim.pipeline import Pipeline
@@ -15,3 +16,13 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 FACE = Pipeline(name="face", stages=(), default_config=CONFIGS / "default.yaml")
 
 PIPELINES: dict[str, Pipeline] = {p.name: p for p in (FACE,)}
+
+
+def get_pipeline(name: str) -> Pipeline:
+    """A pipeline by name (``face``...) or by import path ``package.module:ATTRIBUTE``."""
+    if ":" in name:
+        module, attr = name.split(":", 1)
+        return getattr(importlib.import_module(module), attr)
+    if name not in PIPELINES:
+        raise ValueError(f"unknown pipeline {name!r}; known: {', '.join(PIPELINES)}")
+    return PIPELINES[name]

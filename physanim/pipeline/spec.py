@@ -37,6 +37,14 @@ class DatasetParams(BaseModel):
         return self.store_path.parent
 
 
+def dataset_overrides(dataset: str) -> list[str]:
+    """``--set`` overrides selecting a dataset by name (``data/<name>``) or by directory."""
+    p = Path(dataset)
+    if len(p.parts) > 1 or p.is_absolute():
+        return [f"dataset.name={p.name}", f"dataset.dir={p}"]
+    return [f"dataset.name={dataset}"]
+
+
 @dataclass(frozen=True)
 class StageSpec:
     """One stage: its name, upstream stages, params model, code version and compute function.

@@ -1,0 +1,135 @@
+"""Parameter sweeps over datasets and variants, on Dask through Prefect (prefect-dask).
+
+Every distinct (store, stage, key) of the sweep is one Prefect task; tasks wait for their
+upstream tasks, so stages shared by several variants run once and variants fan out in parallel
+on the Dask workers.  Import only after ``prefect_env.configure``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from prefect import flow, task
+from prefect.cache_policies import NONE
+from prefect_dask import DaskTaskRunner
+
+from physanim.config import load_config
+from physanim.pipeline import Pipeline, StageResult, execute_stage, make_plan
+from physanim.pipeline.sweep import Job, Variant, load_sweep, merge_plans
+from physanim.store import StageStore
+from tasks.pipelines import get_pipeline
+
+
+@dataclass(frozen=True)
+class SweepOutcome:
+    """What a sweep did: per-variant stage keys, the jobs run, wall time (s), summary file."""
+
+    variants: dict[str, dict[str, str]]
+    results: list[StageResult]
+    seconds: float
+    summary_path: Path
+
+
+@task(cache_policy=NONE, persist_result=False)
+def sweep_stage(pipeline: Pipeline, config: dict[str, Any], job: Job) -> StageResult:
+    """Run one distinct stage execution of the sweep on a worker."""
+    return execute_stage(pipeline, config, job.entry)
+
+
+@flow(name="physanim-sweep", persist_result=False, validate_parameters=False)
+def sweep_flow(
+    pipeline: Pipeline, configs: dict[str, dict[str, Any]], jobs: list[Job]
+) -> list[StageResult]:
+    """Submit every job, each waiting for the jobs of its upstream stages."""
+    futures: dict[tuple[str, str, str], Any] = {}
+    for job in jobs:
+        deps = [futures[d] for d in job.deps if d in futures]
+        named = sweep_stage.with_options(
+            name=job.entry.stage, task_run_name=f"{job.entry.stage}-{job.entry.key[:8]}"
+        )
+        futures[job.ident] = named.submit(pipeline, configs[job.variant], job, wait_for=deps)
+    return [f.result() for f in futures.values()]
+
+
+def plan_sweep(path: Path) -> tuple[Pipeline, list[Variant], dict[str, Any], list[Job]]:
+    """Expand a sweep file, validate every variant's config and merge their plans."""
+    spec, variants = load_sweep(path)
+    pipeline = get_pipeline(spec.pipeline)
+    configs: dict[str, Any] = {}
+    plans = {}
+    for v in variants:
+        cfg, _ = load_config(
+            pipeline.config_model(), [pipeline.default_config, *v.configs], v.overrides
+        )
+        store = StageStore(cfg.dataset.store_path)  # type: ignore[attr-defined]
+        store.remove_stale_temporaries()
+        configs[v.name] = cfg
+        plans[v.name] = (str(store.root), make_plan(pipeline, cfg, store))
+    return pipeline, variants, configs, merge_plans(plans) if plans else []
+
+
+def run_sweep(
+    path: Path, *, dask_address: str | None = None, workers: int = 2, serial: bool = False
+) -> SweepOutcome:
+    """Run a sweep; ``serial`` runs the jobs one by one in this process (reference timing)."""
+    pipeline, variants, configs, jobs = plan_sweep(path)
+    run_dir = configs[variants[0].name].dataset.run_dir
+    t0 = time.perf_counter()
+    if serial:
+        results = [execute_stage(pipeline, configs[j.variant], j.entry) for j in jobs]
+    elif jobs:
+        scratch = Path(run_dir).resolve() / "dask"
+        scratch.mkdir(parents=True, exist_ok=True)
+        os.environ.setdefault("DASK_TEMPORARY_DIRECTORY", str(scratch))
+        if dask_address:
+            runner = DaskTaskRunner(address=dask_address)
+        else:
+            runner = DaskTaskRunner(
+                cluster_kwargs={
+                    "n_workers": workers,
+                    "threads_per_worker": 1,
+                    "processes": True,
+                    "dashboard_address": None,
+                    "local_directory": str(scratch),
+                }
+            )
+        dumped = {k: c.model_dump(mode="json") for k, c in configs.items()}
+        results = sweep_flow.with_options(task_runner=runner)(pipeline, dumped, jobs)
+    else:
+        results = []
+    seconds = time.perf_counter() - t0
+
+    table: dict[str, dict[str, str]] = {}
+    rows = []
+    for v in variants:
+        cfg = configs[v.name]
+        store = StageStore(cfg.dataset.store_path)
+        plan = make_plan(pipeline, cfg, store)
+        table[v.name] = {e.stage: e.key for e in plan}
+        summaries = {
+            e.stage: store.provenance(e.stage, e.key).get("summary", {})
+            for e in plan
+            if store.has(e.stage, e.key)
+        }
+        rows.append(
+            {
+                "variant": v.name,
+                "dataset": v.dataset,
+                "keys": table[v.name],
+                "summaries": summaries,
+                "overrides": list(v.overrides),
+            }
+        )
+    out = Path(run_dir) / "sweeps" / Path(path).stem / "summary.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(
+        json.dumps(
+            {"sweep": str(path), "seconds": seconds, "variants": rows}, indent=2, default=str
+        )
+    )
+    return SweepOutcome(table, list(results), seconds, out)

@@ -1,0 +1,57 @@
+"""Sweeps: shared upstream stages run once; variants fan out on Dask workers through Prefect."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from physanim.config import ConfigError
+from physanim.pipeline.sweep import load_sweep
+from physanim.store import StageStore
+from tests.foundation.toy_stages import executions
+
+ROOT = Path(__file__).resolve().parents[2]
+TOY = "tests.foundation.toy_stages:TOY"
+
+
+def test_expansion_grid_times_list(tmp_path: Path) -> None:
+    f = tmp_path / "s.yaml"
+    f.write_text(
+        f"pipeline: {TOY}\ndatasets: [a, b]\nset: {{source.n_frames: 3}}\n"
+        "grid: {scale.factor: [1, 2]}\nvariants: [{name: big, set: {scale.factor: 9}}]\n"
+    )
+    _, variants = load_sweep(f)
+    assert [v.name for v in variants] == [
+        "a:scale.factor=1", "a:scale.factor=2", "a:big",
+        "b:scale.factor=1", "b:scale.factor=2", "b:big",
+    ]  # fmt: skip
+    assert variants[2].overrides == ("dataset.name=a", "source.n_frames=3", "scale.factor=9")
+    f.write_text("grid: {scale.factor: 3}\n")
+    with pytest.raises(
+        ConfigError, match=r"s.yaml: grid.scale.factor: Input should be a valid list"
+    ):
+        load_sweep(f)
+
+
+def test_sweep_on_dask_computes_shared_stage_once(toy_config: Path, tmp_path: Path) -> None:
+    sweep = tmp_path / "sweep.yaml"
+    data = tmp_path / "data"
+    sweep.write_text(
+        f"pipeline: {TOY}\ndatasets: [{data}]\ngrid: {{scale.factor: [1.0, 2.0, 3.0]}}\n"
+    )
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_")}
+    env.update(PYTHONPATH=str(ROOT), PHYSANIM_TOY_LOG=str(tmp_path / "executions.log"))
+    cmd = [sys.executable, "-m", "physanim", "sweep", str(sweep), "--workers", "2"]
+    out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    ran = executions(tmp_path)
+    assert sorted(ran) == ["scale"] * 3 + ["source"] + ["total"] * 3
+    store = StageStore(tmp_path / "data" / "runs" / "store.zarr")
+    totals = sorted(float(store.open("total", k)["total"][0]) for k in store.keys("total"))
+    base = 499500 * 8 + 1000 * 28
+    assert totals == pytest.approx([base, 2 * base, 3 * base])
+    assert (tmp_path / "data" / "runs" / "sweeps" / "sweep" / "summary.json").exists()
