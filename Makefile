@@ -16,12 +16,14 @@ CONFIG_ARGS := $(foreach c,$(CONFIG),-c $(c))
 # rendering through EGL (libegl1, libgl1), OpenCV video (nothing extra).
 DEB_PACKAGES := libusb-1.0-0 libgomp1 libgl1 libegl1 libglib2.0-0
 
-.PHONY: help setup setup-system system-check pipeline stage status dag demo test bench lint format clean-store
+.PHONY: help setup setup-system system-check pipeline stage status arm sweep dag demo test bench lint format clean-store
 
 help:
 	@echo "make pipeline [DATASET=demo] [CONFIG=configs/x.yaml] - run the face pipeline"
 	@echo "make stage STAGE=name                              - (re)run one stage"
-	@echo "make status | dag | demo | test | bench | lint | setup-system"
+	@echo "make arm                                           - muscle-driven arm, all conditions"
+	@echo "make sweep SWEEP=configs/sweeps/x.yaml             - parameter sweep on Dask"
+	@echo "make status | dag | test | bench | lint | setup-system"
 
 $(VENV)/.installed: pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -53,6 +55,13 @@ stage: setup
 
 status: setup
 	$(PHYSANIM) status -p $(PIPELINE) --dataset $(DATASET) $(CONFIG_ARGS) $(ARGS)
+
+arm: setup
+	$(PHYSANIM) run -p arm $(CONFIG_ARGS) $(ARGS)
+
+sweep: setup
+	@test -n "$(SWEEP)" || { echo "usage: make sweep SWEEP=configs/sweeps/<name>.yaml"; exit 2; }
+	$(PHYSANIM) sweep $(SWEEP) $(ARGS)
 
 dag: setup
 	$(PHYSANIM) dag -p $(PIPELINE) $(ARGS)

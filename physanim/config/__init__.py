@@ -2,6 +2,7 @@
 
 from physanim.config.loader import (
     ConfigError,
+    deep_merged,
     load_config,
     load_yaml,
     merge_sources,
@@ -9,4 +10,12 @@ from physanim.config.loader import (
     validate,
 )
 
-__all__ = ["ConfigError", "load_config", "load_yaml", "merge_sources", "parse_override", "validate"]
+__all__ = [
+    "ConfigError",
+    "deep_merged",
+    "load_config",
+    "load_yaml",
+    "merge_sources",
+    "parse_override",
+    "validate",
+]

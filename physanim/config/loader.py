@@ -87,6 +87,13 @@ def _record(tree: Mapping[str, Any], source: str, origins: dict[str, str], prefi
             _record(v, source, origins, f"{prefix}{k}.")
 
 
+def deep_merged(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of ``base`` with ``over`` merged in key by key (nested mappings merge too)."""
+    out = copy.deepcopy(dict(base))
+    _merge(out, over, "", {})
+    return out
+
+
 def parse_override(text: str) -> dict[str, Any]:
     """Turn ``"simulate.dt=0.001"`` into ``{"simulate": {"dt": 0.001}}`` (value parsed as YAML)."""
     if "=" not in text:

@@ -11,7 +11,7 @@ import zarr
 from pydantic import BaseModel
 
 from physanim.pipeline.spec import DatasetParams, StageSpec
-from physanim.store import StageStore, write_array
+from physanim.store import StageStore, write_array, write_dataclass
 
 #: progress callback passed to library loops: (done, total) -> None
 ProgressFn = Callable[[int, int], None]
@@ -50,6 +50,17 @@ class StageContext:
     def write(self, name: str, data: np.ndarray) -> zarr.Array:
         """Write one array of this output, chunked by frames."""
         return write_array(self.out, name, data)
+
+    @property
+    def files_dir(self) -> Path:
+        """Directory for this output's plain files (PNG, MP4, HTML), committed with the arrays."""
+        d = Path(self.out.store.root) / self.out.path / "files"
+        d.mkdir(parents=True, exist_ok=True)
+        return d
+
+    def write_record(self, record: object, prefix: str = "") -> None:
+        """Write every array field of a dataclass (``prefix/<field>``), chunked by frames."""
+        write_dataclass(self.out, record, prefix)
 
     @property
     def dataset_dir(self) -> Path:

@@ -1,13 +1,22 @@
 """Content-addressed Zarr store of stage outputs (see stage_store for the layout)."""
 
 from physanim.store.keys import canonical_json, stage_key
-from physanim.store.stage_store import StageOutputMissing, StageStore, frame_chunks, write_array
+from physanim.store.stage_store import (
+    StageOutputMissing,
+    StageStore,
+    frame_chunks,
+    read_dataclass,
+    write_array,
+    write_dataclass,
+)
 
 __all__ = [
     "StageOutputMissing",
     "StageStore",
     "canonical_json",
     "frame_chunks",
+    "read_dataclass",
     "stage_key",
     "write_array",
+    "write_dataclass",
 ]

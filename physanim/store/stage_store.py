@@ -20,6 +20,7 @@ Atomic rename is why the store must be a local (or POSIX-shared, e.g. NFS) direc
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime as dt
 import json
 import os
@@ -29,12 +30,14 @@ import time
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import zarr
 
 import physanim
+
+T = TypeVar("T")
 
 TMP = ".tmp"
 LATEST = "LATEST"
@@ -64,6 +67,30 @@ def write_array(group: zarr.Group, name: str, data: np.ndarray) -> zarr.Array:
     arr = group.create_array(name, shape=data.shape, dtype=data.dtype, chunks=chunks or "auto")
     arr[...] = data
     return arr
+
+
+def write_dataclass(group: zarr.Group, record: object, prefix: str = "") -> None:
+    """Write each numpy-array field of dataclass ``record`` as ``<prefix>/<field>``.
+
+    Scalar fields (numbers, strings, bools, lists of them) go to the group's attributes.
+    """
+    target = group.require_group(prefix) if prefix else group
+    for f in dataclasses.fields(record):  # type: ignore[arg-type]
+        value = getattr(record, f.name)
+        if isinstance(value, np.ndarray):
+            write_array(target, f.name, value)
+        elif isinstance(value, str | int | float | bool | list | tuple | dict) or value is None:
+            target.attrs[f.name] = value
+        else:
+            raise TypeError(f"cannot store field {f.name!r} of type {type(value).__name__}")
+
+
+def read_dataclass(cls: type[T], group: zarr.Group) -> T:
+    """Rebuild a dataclass written by ``write_dataclass`` from its group."""
+    kwargs = {}
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        kwargs[f.name] = group[f.name][...] if f.name in group else group.attrs[f.name]
+    return cls(**kwargs)
 
 
 def _pid_alive(pid: int) -> bool:
