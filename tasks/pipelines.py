@@ -10,12 +10,25 @@ import importlib
 from pathlib import Path
 
 from physanim.pipeline import Pipeline
+from tasks import arm_render, keyframe_render, keyframes, muscles
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
 FACE = Pipeline(name="face", stages=(), default_config=CONFIGS / "default.yaml")
 
-PIPELINES: dict[str, Pipeline] = {p.name: p for p in (FACE,)}
+ARM = Pipeline(
+    name="arm",
+    stages=(muscles.SPEC, arm_render.SPEC),
+    default_config=CONFIGS / "arm" / "default.yaml",
+)
+
+KEYFRAME = Pipeline(
+    name="keyframe",
+    stages=(keyframes.SPEC, keyframe_render.SPEC),
+    default_config=CONFIGS / "keyframe.yaml",
+)
+
+PIPELINES: dict[str, Pipeline] = {p.name: p for p in (FACE, ARM, KEYFRAME)}
 
 
 def get_pipeline(name: str) -> Pipeline:

@@ -1,0 +1,64 @@
+"""Stage ``keyframe_render``: capsule-figure frames, MP4 and a joint-angle plot."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from physanim.dynamics import Figure
+from physanim.dynamics.keyframes import KeyframeSpec, environment
+from physanim.pipeline import StageContext, StageSpec
+from physanim.render.figure import render_animation
+from tasks.keyframes import KeyframeStageParams, project_path
+
+
+class KeyframeRenderParams(BaseModel):
+    """What to draw."""
+
+    model_config = ConfigDict(extra="forbid")
+    trail_links: list[str] = Field(
+        default_factory=list, description="links whose tips leave trails"
+    )
+    com_trail: bool = Field(True, description="draw the centre of mass trail")
+    azimuth_deg: float = Field(60.0, ge=-360, le=360, description="camera azimuth, deg")
+    elevation_deg: float = Field(15.0, ge=-90, le=90, description="camera elevation, deg")
+
+
+def compute(ctx: StageContext) -> None:
+    """Render the upstream animation into this output's files/."""
+    params: KeyframeRenderParams = ctx.params  # type: ignore[assignment]
+    anim = ctx.input("keyframes")
+    up = KeyframeStageParams.model_validate(
+        ctx.store.provenance("keyframes", ctx.upstream["keyframes"])["params"]
+    )
+    spec = KeyframeSpec.from_yaml(project_path(up.file))
+    fig = Figure.from_yaml(spec.figure)
+    missing = [n for n in params.trail_links if n not in fig.joint_names]
+    if missing:
+        raise ValueError(f"keyframe_render.trail_links: {missing} are not links of {fig.name}")
+    written = render_animation(
+        fig,
+        anim["q"][...],
+        anim["placement/base_pos"][...],
+        spec.fps,
+        ctx.files_dir,
+        env=environment(spec),
+        trail_links=params.trail_links,
+        com=anim["placement/com"][...] if params.com_trail else None,
+        simulated=anim["simulated"][...],
+        key_times=[k.frame / spec.fps for k in spec.keys],
+        title=spec.name,
+        azimuth=params.azimuth_deg,
+        elevation=params.elevation_deg,
+        progress=ctx.progress("render"),
+    )
+    ctx.summary["files"] = sorted(str(p.relative_to(ctx.files_dir)) for p in written.values())
+
+
+SPEC = StageSpec(
+    name="keyframe_render",
+    upstream=("keyframes",),
+    params=KeyframeRenderParams,
+    version="1",
+    compute=compute,
+    doc="capsule figure frames + MP4 + joint-angle plot",
+)

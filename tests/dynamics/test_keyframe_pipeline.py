@@ -1,0 +1,40 @@
+"""The keyframe pipeline (local runner): stored animation, video, file-content caching."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from physanim.config import load_config
+from physanim.pipeline import execute_plan_locally, make_plan
+from physanim.store import StageStore
+from tasks.pipelines import KEYFRAME
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def test_keyframe_pipeline_renders_and_tracks_file_content(tmp_path: Path) -> None:
+    keys = tmp_path / "keyframes" / "jump.yaml"
+    keys.parent.mkdir()
+    shutil.copy(CONFIGS / "keyframes" / "jump.yaml", keys)
+    shutil.copytree(CONFIGS / "figures", tmp_path / "figures")
+    sets = [f"dataset.dir={tmp_path / 'run'}", f"keyframes.file={keys}"]
+    cfg, _ = load_config(KEYFRAME.config_model(), [KEYFRAME.default_config], sets)
+    store = StageStore(cfg.dataset.store_path)
+    execute_plan_locally(KEYFRAME, cfg, make_plan(KEYFRAME, cfg, store))
+
+    anim = store.open("keyframes")
+    assert anim["q"].shape == (31, 30)  # 31 frames, 30 DOF
+    assert float(np.min(anim["placement/distance"][...])) > -1e-3  # no penetration > 1 mm
+    video = cv2.VideoCapture(
+        str(Path(store.open("keyframe_render").store.root) / "files" / "animation.mp4")
+    )
+    assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 31
+
+    assert [e.action for e in make_plan(KEYFRAME, cfg, store)] == ["cached", "cached"]
+    keys.write_text(keys.read_text().replace("frame: 30", "frame: 32"))  # edit the file
+    plan = make_plan(KEYFRAME, cfg, store)
+    assert [e.action for e in plan] == ["run", "run"] and "inputs.jump.yaml" in plan[0].reason
