@@ -123,12 +123,18 @@ def run(
     t0 = time.perf_counter()
     dag = _pipeline(pipeline)
     cfg = load(dag, config, set_, dataset)
+    from physanim.pipeline.progress import rich_progress
+
+    if dag.prepare is not None:
+        with rich_progress(console) as progress:
+            made = dag.prepare(cfg, progress)
+        if made:
+            console.print(f"generated {made}")
     store, entries = _plan(dag, cfg, only, start, force)
     for stale in store.remove_stale_temporaries():
         console.print(f"removed abandoned partial output {stale.name}")
     todo = [e for e in entries if e.action == "run"]
     from physanim.pipeline import execute_plan_locally
-    from physanim.pipeline.progress import rich_progress
 
     if not todo or local:
         with rich_progress(console) as progress:
@@ -263,6 +269,27 @@ def clean(
         store.remove_stale_temporaries()
     if not doomed and not stale:
         print("nothing to clean")
+
+
+@app.command()
+def demo(
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    out: Annotated[Path | None, typer.Option(help="directory (default data/demo)")] = None,
+    force: Annotated[bool, typer.Option("--force", help="regenerate if present")] = False,
+) -> None:
+    """Generate the demo dataset (virtual actor from a real scan, bag, RGBD, stereo, truth)."""
+    from physanim.capture.demo import generate_demo
+    from physanim.pipeline.progress import rich_progress
+
+    cfg = load(_pipeline("face"), config, set_, None)
+    target = out or cfg.dataset.path  # type: ignore[attr-defined]
+    if target.exists() and not force:
+        console.print(f"{target} exists (use --force to regenerate)")
+        raise typer.Exit(0)
+    with rich_progress(console) as progress:
+        made = generate_demo(target, params=cfg.demo, progress=progress("demo dataset"))  # type: ignore[attr-defined]
+    console.print(f"generated {made}")
 
 
 @app.command()

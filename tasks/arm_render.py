@@ -4,15 +4,8 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from physanim.muscle.arm import ArmResult
 from physanim.muscle.params import ArmConditions
 from physanim.pipeline import StageContext, StageSpec
-from physanim.render.arm import (
-    plot_condition_summary,
-    plot_muscle_curves,
-    plot_muscle_timeseries,
-    render_arm_video,
-)
 from physanim.store import read_dataclass
 
 
@@ -26,6 +19,14 @@ class ArmRenderParams(BaseModel):
 
 def compute(ctx: StageContext) -> None:
     """Render every condition of the upstream ``muscles`` output into this output's files/."""
+    from physanim.muscle.arm import ArmResult
+    from physanim.render.arm import (
+        plot_condition_summary,
+        plot_muscle_curves,
+        plot_muscle_timeseries,
+        render_arm_video,
+    )
+
     params: ArmRenderParams = ctx.params  # type: ignore[assignment]
     conditions: ArmConditions = ArmConditions.model_validate(
         ctx.store.provenance("muscles", ctx.upstream["muscles"])["params"]

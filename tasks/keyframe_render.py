@@ -4,10 +4,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from physanim.dynamics import Figure
-from physanim.dynamics.keyframes import KeyframeSpec, environment
 from physanim.pipeline import StageContext, StageSpec
-from physanim.render.figure import render_animation
 from tasks.keyframes import KeyframeStageParams, project_path
 
 
@@ -25,6 +22,10 @@ class KeyframeRenderParams(BaseModel):
 
 def compute(ctx: StageContext) -> None:
     """Render the upstream animation into this output's files/."""
+    from physanim.dynamics import Figure
+    from physanim.dynamics.keyframes import KeyframeSpec, environment
+    from physanim.render.figure import render_animation
+
     params: KeyframeRenderParams = ctx.params  # type: ignore[assignment]
     anim = ctx.input("keyframes")
     up = KeyframeStageParams.model_validate(

@@ -8,8 +8,6 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from physanim.dynamics import Figure
-from physanim.dynamics.keyframes import KeyframeSpec, run_keyframes
 from physanim.dynamics.params import KeyframeParams
 from physanim.pipeline import DatasetParams, StageContext, StageSpec
 
@@ -39,6 +37,8 @@ class KeyframeStageParams(BaseModel):
 
 def fingerprint(_dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]:
     """Content hashes of the keyframe file and of the figure it names."""
+    from physanim.dynamics.keyframes import KeyframeSpec
+
     spec_path = project_path(params.file)  # type: ignore[attr-defined]
     spec = KeyframeSpec.from_yaml(spec_path)
     return {
@@ -49,6 +49,9 @@ def fingerprint(_dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]
 
 def compute(ctx: StageContext) -> None:
     """Animate; arrays q, qd (F, n) rad, simulated mask, placement (base_pos, com, ...)."""
+    from physanim.dynamics import Figure
+    from physanim.dynamics.keyframes import KeyframeSpec, run_keyframes
+
     params: KeyframeStageParams = ctx.params  # type: ignore[assignment]
     spec = KeyframeSpec.from_yaml(project_path(params.file))
     fig = Figure.from_yaml(spec.figure)

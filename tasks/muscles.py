@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from physanim.muscle.arm import solve_arm
 from physanim.muscle.params import ArmConditions
 from physanim.pipeline import StageContext, StageSpec
 
 
 def compute(ctx: StageContext) -> None:
     """Solve each condition; arrays under ``<condition>/<field>`` (time axis first)."""
+    from physanim.muscle.arm import solve_arm
+
     params: ArmConditions = ctx.params  # type: ignore[assignment]
     studies = params.resolved()
     report = ctx.progress("muscles")

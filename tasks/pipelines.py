@@ -9,12 +9,19 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
+from physanim.capture.params import DemoParams
 from physanim.pipeline import Pipeline
-from tasks import arm_render, keyframe_render, keyframes, muscles
+from tasks import arm_render, fit, ingest, keyframe_render, keyframes, muscles, track
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
-FACE = Pipeline(name="face", stages=(), default_config=CONFIGS / "default.yaml")
+FACE = Pipeline(
+    name="face",
+    stages=(ingest.SPEC, track.SPEC, fit.SPEC),
+    default_config=CONFIGS / "default.yaml",
+    extra_sections={"demo": DemoParams},
+    prepare=ingest.ensure_demo,
+)
 
 ARM = Pipeline(
     name="arm",

@@ -75,6 +75,8 @@ class Pipeline:
     stages: tuple[StageSpec, ...]
     default_config: Path
     extra_sections: Mapping[str, type[BaseModel]] = field(default_factory=dict)
+    #: called by ``run`` before planning, e.g. to generate a missing demo dataset
+    prepare: Callable[[BaseModel, Any], Any] | None = None
 
     def __post_init__(self) -> None:
         seen: set[str] = set()

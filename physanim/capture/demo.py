@@ -1,0 +1,227 @@
+"""The embedded demo dataset: a virtual actor (real face000 scan) performing a known
+expression sequence in front of a virtual RealSense-like RGB-D camera and a stereo pair.
+
+Layout of the dataset directory (written to a temporary sibling, renamed at the end, so a
+crash never leaves a half dataset that looks complete)::
+
+    capture.bag            RealSense ROS1 bag (colour rgb8 + registered depth z16)
+    rgbd/color/000000.png  Open3D RGBD folder: colour PNG, depth uint16 PNG,
+    rgbd/depth/000000.png  intrinsic.json (Open3D PinholeCameraIntrinsic + depth_scale, fps)
+    rgbd/intrinsic.json
+    stereo/left/000000.png rectified stereo pair (left = the colour camera)
+    stereo/right/000000.png
+    stereo/calibration.yaml OpenCV FileStorage: K1 D1 K2 D2 R T image_width image_height fps
+    ground_truth.zarr      see ``write_ground_truth``
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+import numpy as np
+import zarr
+
+from physanim.capture.actor import build_actor
+from physanim.capture.bag_writer import RealSenseBagWriter
+from physanim.capture.camera_rig import CameraRig, realsense_like_rig, to_camera
+from physanim.capture.markers import place_markers
+from physanim.capture.params import DemoParams
+from physanim.capture.performance import AnalyticFaceField, demo_performance
+from physanim.capture.synth_render import (
+    SkinTexture,
+    color_to_uint8,
+    depth_sensor,
+    render_view,
+)
+
+#: Direction towards the key light in the colour camera frame (upper left, in front).
+LIGHT_CAM = np.array([-0.35, -0.5, -0.8]) / np.linalg.norm([-0.35, -0.5, -0.8])
+
+
+def write_rgbd_intrinsics(
+    path: Path, K: np.ndarray, size: tuple[int, int], depth_scale: float, fps: float
+) -> None:
+    """Open3D ``intrinsic.json`` (column-major matrix) plus ``depth_scale`` (units/m), ``fps``."""
+    h, w = size
+    data = {
+        "width": w,
+        "height": h,
+        "intrinsic_matrix": K.T.ravel().tolist(),
+        "depth_scale": depth_scale,
+        "fps": fps,
+    }
+    path.write_text(json.dumps(data, indent=2))
+
+
+def write_stereo_calibration(path: Path, rig: CameraRig, fps: float) -> None:
+    """OpenCV YAML: K1, D1, K2, D2, R (right <- left), T (m), image size, fps."""
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("K1", rig.K)
+    fs.write("D1", np.zeros((1, 5)))
+    fs.write("K2", rig.K)
+    fs.write("D2", np.zeros((1, 5)))
+    fs.write("R", np.eye(3))
+    fs.write("T", np.array([[-rig.baseline], [0.0], [0.0]]))
+    fs.write("image_width", rig.size[1])
+    fs.write("image_height", rig.size[0])
+    fs.write("fps", float(fps))
+    fs.release()
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    img = cv2.cvtColor(image, cv2.COLOR_RGB2BGR) if image.ndim == 3 else image
+    if not cv2.imwrite(str(path), img):
+        raise OSError(f"{path}: cannot write image")
+
+
+def generate_demo(
+    out_dir: Path,
+    *,
+    seed: int | None = None,
+    n_frames: int | None = None,
+    fps: float | None = None,
+    params: DemoParams | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Path:
+    """Generate the demo dataset into ``out_dir`` (replacing it) and return ``out_dir``.
+
+    ``seed``, ``n_frames``, ``fps`` override the same fields of ``params`` (defaults:
+    ``DemoParams()``: seed 0, 90 frames at 30 fps). Deterministic for given parameters.
+    """
+    p = params or DemoParams()
+    overrides = {"seed": seed, "n_frames": n_frames, "fps": fps}
+    p = DemoParams(**{**p.model_dump(), **{k: v for k, v in overrides.items() if v is not None}})
+    out_dir = Path(out_dir)
+    tmp = out_dir.parent / f".{out_dir.name}.partial-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    (tmp / "rgbd" / "color").mkdir(parents=True)
+    (tmp / "rgbd" / "depth").mkdir()
+    (tmp / "stereo" / "left").mkdir(parents=True)
+    (tmp / "stereo" / "right").mkdir()
+    try:
+        _generate_into(tmp, p, progress)
+        old = out_dir.parent / f".{out_dir.name}.old-{os.getpid()}"
+        if out_dir.exists():
+            out_dir.rename(old)
+        tmp.rename(out_dir)
+        shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out_dir
+
+
+def _generate_into(root: Path, p: DemoParams, progress: Callable[[int, int], None] | None) -> None:
+    actor = build_actor()
+    v0, faces = actor.vertices, actor.faces
+    markers = place_markers(v0, faces)
+    m0 = markers.positions(v0, faces)
+    idx = {n: i for i, n in enumerate(markers.names)}
+    field = AnalyticFaceField(ch_left=tuple(m0[idx["ch_L"]]), ch_right=tuple(m0[idx["ch_R"]]))
+    perf = demo_performance(p.n_frames, p.fps, p.seed)
+    head = perf.head_pose()
+    rig = realsense_like_rig(distance_m=p.camera_distance_m, baseline_m=p.stereo_baseline_m)
+    texture = SkinTexture.random(p.seed)
+    h, w = rig.size
+    T, N, K = p.n_frames, len(v0), len(markers.names)
+
+    gt = zarr.open_group(root / "ground_truth.zarr", mode="w")
+    arrays = {
+        "vertices_actor": ((T, N, 3), (1, N, 3)),
+        "markers_actor": ((T, K, 3), (T, K, 3)),
+        "markers_camera": ((T, K, 3), (T, K, 3)),
+        "depth_true": ((T, h, w), (1, h, w)),
+    }
+    gt_arr = {
+        name: gt.create_array(name, shape=shape, chunks=chunks, dtype="float32", fill_value=np.nan)
+        for name, (shape, chunks) in arrays.items()
+    }
+    view_kw = dict(marker_radius=p.marker_radius_m, light_cam=LIGHT_CAM, supersample=p.supersample)
+    with RealSenseBagWriter(
+        root / "capture.bag", rig.K, rig.size, fps=p.fps, depth_scale=p.depth_unit_m
+    ) as bag:
+        for t in range(T):
+            va = v0 + field.displacement(v0, perf.params[t])
+            vw = va @ head[t, :3, :3].T + head[t, :3, 3]
+            left = render_view(
+                to_camera(vw, rig.pose_left), v0, faces, rig.K, rig.size, texture, m0, **view_kw
+            )
+            right = render_view(
+                to_camera(vw, rig.pose_right),
+                v0,
+                faces,
+                rig.K,
+                rig.size,
+                texture,
+                m0,
+                with_depth=False,
+                **view_kw,
+            )
+            rng = np.random.default_rng([p.seed, t])
+            color = color_to_uint8(left.color, rng, p.color_noise)
+            color_r = color_to_uint8(right.color, rng, p.color_noise)
+            depth = depth_sensor(
+                left,
+                rng,
+                depth_unit_m=p.depth_unit_m,
+                sigma_at_0_5m=p.depth_noise_m,
+                min_cos_view=p.min_cos_view,
+            )
+            name = f"{t:06d}.png"
+            _write_png(root / "rgbd" / "color" / name, color)
+            _write_png(root / "rgbd" / "depth" / name, depth)
+            _write_png(root / "stereo" / "left" / name, color)
+            _write_png(root / "stereo" / "right" / name, color_r)
+            bag.add_frame(color, depth, perf.times[t])
+            gt_arr["vertices_actor"][t] = va.astype(np.float32)
+            gt_arr["depth_true"][t] = left.depth.astype(np.float32)
+            if progress is not None:
+                progress(t + 1, T)
+
+    verts = gt_arr["vertices_actor"][:]
+    m_actor = markers.positions(verts.astype(np.float64), faces)
+    m_world = np.einsum("tij,tkj->tki", head[:, :3, :3], m_actor) + head[:, None, :3, 3]
+    gt_arr["markers_actor"][:] = m_actor.astype(np.float32)
+    gt_arr["markers_camera"][:] = to_camera(m_world, rig.pose_left).astype(np.float32)
+    for name, value in {
+        "neutral_vertices": v0,
+        "faces": faces,
+        "marker_face": markers.face,
+        "marker_bary": markers.bary,
+        "markers_neutral": m0,
+        "expression": perf.params,
+        "head_pose": head,
+        "timestamps": perf.times,
+        "K": rig.K,
+        "camera_pose": rig.pose_left,
+        "right_camera_pose": rig.pose_right,
+    }.items():
+        gt.create_array(name, data=np.asarray(value))
+    gt.attrs.update(
+        {
+            "marker_names": list(markers.names),
+            "expression_names": list(field.param_names),
+            "expression_model": "AnalyticFaceField",
+            "expression_field": field.to_dict(),
+            "head_center": perf.head_center.tolist(),
+            "image_size": [h, w],
+            "stereo_baseline_m": rig.baseline,
+            "fps": p.fps,
+            "depth_unit_m": p.depth_unit_m,
+            "demo_params": p.model_dump(),
+            "frames": (
+                "vertices_actor/markers_actor: head-fixed actor frame (m); head_pose (T,4,4) "
+                "world <- actor; camera_pose/right_camera_pose (4,4) world <- camera (OpenCV "
+                "axes); markers_camera and depth_true (z, NaN off the face): colour camera"
+            ),
+        }
+    )
+    write_rgbd_intrinsics(
+        root / "rgbd" / "intrinsic.json", rig.K, rig.size, 1.0 / p.depth_unit_m, p.fps
+    )
+    write_stereo_calibration(root / "stereo" / "calibration.yaml", rig, p.fps)

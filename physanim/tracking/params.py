@@ -1,0 +1,51 @@
+"""Parameters of the landmark tracking stage (``track``)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class TrackParams(BaseModel):
+    """Marker detection, labelling, Lucas-Kanade tracking, 3D lifting and smoothing."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    backend: Literal["markers"] = Field(
+        "markers", description="landmark source: painted markers (the only backend so far)"
+    )
+    marker_rgb: tuple[float, float, float] = Field(
+        (0.22, 0.36, 0.42), description="albedo of the painted dots, linear RGB in [0, 1]"
+    )
+    chroma_tolerance: float = Field(
+        0.07, gt=0.0, le=1.0, description="max chromaticity distance of a marker pixel (unitless)"
+    )
+    min_area_px: int = Field(3, ge=1, description="smallest dot area (pixels)")
+    max_area_px: int = Field(400, ge=1, description="largest dot area (pixels)")
+    label_gate_px: float = Field(
+        12.0, gt=0.0, description="max template-to-dot distance when labelling frame 0 (px)"
+    )
+    track_gate_px: float = Field(
+        4.0, gt=0.0, description="max distance of a dot from its LK prediction (px)"
+    )
+    lk_window_px: int = Field(15, ge=5, le=101, description="Lucas-Kanade window side (px)")
+    lk_levels: int = Field(3, ge=0, le=8, description="Lucas-Kanade pyramid levels (count)")
+    depth_window_px: int = Field(
+        5, ge=1, le=31, description="side of the window for the robust depth median (px, odd)"
+    )
+    smoothing: Literal["none", "one_euro", "kalman"] = Field(
+        "kalman", description="temporal filter of 3D tracks (kalman = zero-lag RTS smoother)"
+    )
+    one_euro_min_cutoff: float = Field(
+        3.0, gt=0.0, description="One-Euro minimum cutoff frequency (Hz)"
+    )
+    one_euro_beta: float = Field(
+        500.0, ge=0.0, description="One-Euro speed coefficient (s/m): larger = less lag"
+    )
+    kalman_accel_std: float = Field(
+        2.0, gt=0.0, description="Kalman process noise: random acceleration std (m/s^2)"
+    )
+    kalman_meas_std: float = Field(
+        0.0005, gt=0.0, description="Kalman measurement noise std of a 3D marker (m)"
+    )

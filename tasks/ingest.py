@@ -1,0 +1,89 @@
+"""Stage ``ingest``: the dataset's recording (bag, RGBD folder or stereo pair) into the store.
+
+Like every module in tasks/, it imports the heavy library parts inside the functions that
+need them, so that planning (``physanim status``) never pays for open3d, VTK or numba.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+from pydantic import BaseModel
+
+from physanim.capture.params import IngestParams
+from physanim.pipeline import DatasetParams, ProgressFactory, StageContext, StageSpec
+
+
+def fingerprint(dataset: DatasetParams, params: BaseModel) -> Mapping[str, object]:
+    """Name, size and modification time of every file of the source that ingest will read.
+
+    Size + mtime (not a content hash) keeps warm runs fast on recordings of many GB; an edited
+    or regenerated recording changes them.
+    """
+    from physanim.capture.ingest import find_source
+
+    try:
+        kind, path = find_source(dataset.path, params.source)  # type: ignore[attr-defined]
+    except (FileNotFoundError, ValueError):
+        return {"missing": str(dataset.path)}  # ingest itself reports what is missing
+    files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+    return {
+        "source": kind,
+        "files": [
+            [str(p.relative_to(dataset.path)), p.stat().st_size, p.stat().st_mtime_ns]
+            for p in files
+        ],
+    }
+
+
+def compute(ctx: StageContext) -> None:
+    """colour (T,H,W,3) uint8, depth (T,H,W) float32 m (NaN invalid), K, timestamps (T,) s."""
+    from physanim.capture.ingest import load_capture
+
+    capture = load_capture(ctx.dataset_dir, ctx.params, ctx.progress("ingest"))  # type: ignore[arg-type]
+    ctx.write_record(capture)
+    ctx.summary.update(
+        source=capture.source,
+        frames=capture.n_frames,
+        fps=capture.fps,
+        mean_valid_depth_fraction=round(float(capture.valid_fraction.mean()), 4),
+        dropped=capture.dropped,
+        duplicated=capture.duplicated,
+        recovered=capture.recovered,
+    )
+
+
+SPEC = StageSpec(
+    name="ingest",
+    upstream=(),
+    params=IngestParams,
+    version="1",
+    compute=compute,
+    doc="RealSense bag / Open3D RGBD folder / stereo pair -> colour, metric depth, intrinsics",
+    fingerprint=fingerprint,
+)
+
+
+def ensure_demo(config: BaseModel, progress: ProgressFactory | None = None) -> Path | None:
+    """Generate the demo dataset when the config names ``demo`` and it has no recording yet.
+
+    Returns the generated directory, or None when nothing had to be done.
+    """
+    from physanim.capture.demo import generate_demo
+
+    dataset: DatasetParams = config.dataset  # type: ignore[attr-defined]
+    if dataset.name != "demo" or _has_recording(dataset.path):
+        return None
+    report = progress("demo dataset") if progress else None
+    return generate_demo(dataset.path, params=config.demo, progress=report)  # type: ignore[attr-defined]
+
+
+def _has_recording(path: Path) -> bool:
+    from physanim.capture.ingest import find_source
+
+    try:
+        find_source(path)
+    except (FileNotFoundError, ValueError):
+        return False
+    return True
