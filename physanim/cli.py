@@ -8,6 +8,9 @@ and ``clean`` never need Prefect).
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -331,6 +334,42 @@ def sweep(
         table.add_row(name, *(keys[s][:8] for s in stages))
     Console().print(table)
     console.print(f"summary: {outcome.summary_path}")
+
+
+@app.command()
+def serve(
+    datasets: Annotated[Path, typer.Argument(help="folder whose sub-directories are datasets")],
+    pipeline: PipelineOpt = "face",
+    config: ConfigOpt = None,
+    interval: Annotated[float | None, typer.Option(help="seconds between scheduled runs")] = None,
+    cron: Annotated[str | None, typer.Option(help='cron schedule, e.g. "0 2 * * *"')] = None,
+) -> None:
+    """Serve a scheduled batch deployment: run the pipeline on new or changed datasets."""
+    if (interval is None) == (cron is None):
+        raise typer.BadParameter("give exactly one of --interval or --cron")
+    if not datasets.is_dir():
+        raise typer.BadParameter(f"{datasets} is not a directory")
+    _pipeline(pipeline)
+    from flows.prefect_env import configure, prefect_server
+
+    home = configure(datasets / ".physanim")
+    args = [sys.executable, "-m", "flows.schedule", str(datasets.resolve()), pipeline]
+    args += ["--interval", str(interval)] if interval is not None else ["--cron", str(cron)]
+    args += [str(Path(c).resolve()) for c in config or []]
+    with prefect_server(home) as (url, started):
+        console.print(f"{'started' if started else 'using'} Prefect server {url}")
+        # The deployment is served by a child process: Prefect's runner stops cleanly on
+        # SIGINT, so SIGINT/SIGTERM here are forwarded to it as SIGINT; then the server stops.
+        child = subprocess.Popen(args, env={**os.environ, "PREFECT_API_URL": url})
+
+        def forward(_signum: int, _frame: object) -> None:
+            child.send_signal(signal.SIGINT)
+
+        signal.signal(signal.SIGTERM, forward)
+        signal.signal(signal.SIGINT, forward)
+        rc = child.wait()
+    console.print(f"stopped (server {'stopped' if started else 'left running'})")
+    raise typer.Exit(0 if rc in (0, -signal.SIGINT, 130) else rc)
 
 
 def main() -> None:

@@ -1,0 +1,45 @@
+"""Scheduled batch runs: `physanim serve` picks up a new dataset and exits cleanly on SIGTERM."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def wait_for(path: Path, seconds: float) -> bool:
+    deadline = time.time() + seconds
+    while time.time() < deadline:
+        if path.exists():
+            return True
+        time.sleep(1.0)
+    return False
+
+
+def test_serve_processes_new_dataset_and_stops_on_signal(tmp_path: Path) -> None:
+    datasets = tmp_path / "datasets"
+    (datasets / "first").mkdir(parents=True)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_")}
+    env.update(PYTHONPATH=str(ROOT), PHYSANIM_TOY_LOG=str(tmp_path / "executions.log"))
+    cmd = [sys.executable, "-m", "physanim", "serve", str(datasets)]
+    cmd += ["-p", "tests.foundation.toy_stages:TOY", "--interval", "3"]
+    proc = subprocess.Popen(
+        cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+    try:
+        first = datasets / "first" / "runs" / "store.zarr" / "total" / "LATEST"
+        assert wait_for(first, 240), "the first scheduled run never completed"
+        (datasets / "second").mkdir()  # a new dataset dropped in while serving
+        second = datasets / "second" / "runs" / "store.zarr" / "total" / "LATEST"
+        assert wait_for(second, 120), "the new dataset was not processed"
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 0, out[-3000:]
+    assert "started Prefect server" in out and "stopped (server stopped)" in out
+    assert (datasets / ".physanim" / "prefect").is_dir()  # Prefect home inside the folder
