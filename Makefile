@@ -13,8 +13,9 @@ ARGS ?=
 CONFIG_ARGS := $(foreach c,$(CONFIG),-c $(c))
 
 # Debian packages the Python wheels need at run time: open3d (libusb, libgomp), VTK offscreen
-# rendering through EGL (libegl1, libgl1), OpenCV video (nothing extra).
-DEB_PACKAGES := libusb-1.0-0 libgomp1 libgl1 libegl1 libglib2.0-0
+# rendering through EGL (libegl1, libgl1); SuiteSparse headers so scikit-sparse (CHOLMOD, the
+# FEM's fastest solver) can build; without them the FEM falls back to SuperLU.
+DEB_PACKAGES := libusb-1.0-0 libgomp1 libgl1 libegl1 libglib2.0-0 libsuitesparse-dev
 
 .PHONY: help setup setup-system system-check pipeline stage status arm sweep dag demo test bench lint format clean-store
 
@@ -29,9 +30,12 @@ $(VENV)/.installed: pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
+	@if [ -f /usr/include/suitesparse/cholmod.h ]; then \
+	  $(PY) -m pip install --quiet -e '.[cholmod]' || echo "scikit-sparse did not build; FEM uses SuperLU"; \
+	else echo "no SuiteSparse headers (make setup-system): FEM uses SuperLU"; fi
 	@touch $@
 
-setup: $(VENV)/.installed system-check
+setup: system-check $(VENV)/.installed
 
 # Installs the Debian packages (needs root or sudo); .ci/run calls it.
 setup-system:
@@ -41,10 +45,10 @@ setup-system:
 
 # Runs setup-system only when a needed shared library is missing.
 system-check:
-	@missing=0; for lib in libusb-1.0.so.0 libgomp.so.1 libEGL.so.1 libGL.so.1; do \
+	@missing=0; for lib in libusb-1.0.so.0 libgomp.so.1 libEGL.so.1 libGL.so.1 libcholmod.so; do \
 	  ldconfig -p | grep -q "$$lib" || missing=1; done; \
 	if [ $$missing = 1 ]; then echo "installing Debian packages: $(DEB_PACKAGES)"; \
-	  $(MAKE) --no-print-directory setup-system; fi
+	  $(MAKE) --no-print-directory setup-system || echo "warning: could not install $(DEB_PACKAGES); run make setup-system as root"; fi
 
 pipeline: setup
 	$(PHYSANIM) run -p $(PIPELINE) --dataset $(DATASET) $(CONFIG_ARGS) $(ARGS)

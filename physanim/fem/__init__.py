@@ -1,0 +1,34 @@
+"""Viscoelastic tetrahedral FEM dynamics (SPEC section 1, stage 7).
+
+Entry point: ``simulate(nodes, tets, materials, driven_idx, driven_traj, frame_dt, fixed_idx,
+params)`` -> ``SimResult``. Lower level: ``build_model`` (K, M, C), ``Newmark``,
+``CorotationalNewmark``, ``solve_static``.
+
+Element formulations (``SimulateParams.formulation``), thick-walled cylinder under internal
+pressure (plane strain, quarter section, b/a = 2), computed / Lame inner displacement:
+
+    nu      tets   p1 (plain 4-node)   anp (default)
+    0.3      864        0.986             0.994
+    0.495    288        0.729             0.976
+    0.495    864        0.792             0.991
+    0.495   3456        0.926             0.998
+    0.4999  3456        0.538             0.996
+
+'anp' averages the volumetric strain at nodes (K = K_dev + G^T diag(kappa_n V_n) G, same
+DOFs, SPD, no spurious zero-energy modes); the deviatoric viscosity needs no averaging.
+"""
+
+from physanim.fem.materials import TetMaterials
+from physanim.fem.model import FemModel, build_model
+from physanim.fem.params import SimulateParams
+from physanim.fem.simulate import SimResult, SimulationDiverged, simulate
+
+__all__ = [
+    "FemModel",
+    "SimResult",
+    "SimulateParams",
+    "SimulationDiverged",
+    "TetMaterials",
+    "build_model",
+    "simulate",
+]

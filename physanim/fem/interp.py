@@ -1,0 +1,44 @@
+"""C1 cubic (Catmull-Rom) interpolation of frame-rate trajectories, with time derivatives."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def catmull_rom(
+    values: np.ndarray, frame_dt: float, times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position, velocity and acceleration of a uniform Catmull-Rom spline at ``times``.
+
+    values (T, K) sampled at t_k = k frame_dt (s); times (S,) in [0, (T-1) frame_dt].
+    Tangents are central differences, one-sided at the ends. Returns three (S, K) arrays in
+    the units of ``values`` per s^0, s^1 and s^2.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    n = len(values)
+    if n < 2:
+        raise ValueError(f"trajectory needs at least 2 frames, got {n}")
+    h = float(frame_dt)
+    tang = np.empty_like(values)
+    tang[1:-1] = (values[2:] - values[:-2]) / (2 * h)
+    tang[0] = (values[1] - values[0]) / h
+    tang[-1] = (values[-1] - values[-2]) / h
+    u = np.clip(np.asarray(times, dtype=np.float64) / h, 0.0, n - 1)
+    k = np.minimum(np.floor(u).astype(np.int64), n - 2)
+    s = (u - k)[:, None]
+    p0, p1, m0, m1 = values[k], values[k + 1], tang[k] * h, tang[k + 1] * h
+    s2, s3 = s * s, s * s * s
+    pos = (
+        (2 * s3 - 3 * s2 + 1) * p0
+        + (s3 - 2 * s2 + s) * m0
+        + (3 * s2 - 2 * s3) * p1
+        + (s3 - s2) * m1
+    )
+    vel = (
+        (6 * s2 - 6 * s) * p0
+        + (3 * s2 - 4 * s + 1) * m0
+        + (6 * s - 6 * s2) * p1
+        + (3 * s2 - 2 * s) * m1
+    ) / h
+    acc = ((12 * s - 6) * p0 + (6 * s - 4) * m0 + (6 - 12 * s) * p1 + (6 * s - 2) * m1) / h**2
+    return pos, vel, acc

@@ -1,0 +1,59 @@
+"""User-tunable parameters of the FEM dynamics (``simulate`` stage)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class SimulateParams(BaseModel):
+    """Parameters of the viscoelastic tetrahedral FEM simulation."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    dt: float = Field(
+        1e-3,
+        gt=0.0,
+        le=0.1,
+        description="Largest Newmark time step, s; each capture frame is split into "
+        "ceil(frame_dt / dt) equal substeps",
+    )
+    formulation: Literal["anp", "p1"] = Field(
+        "anp",
+        description="Element: 'anp' = 4-node tet with averaged nodal pressure (locking-free "
+        "volumetric part, default); 'p1' = plain 4-node tet (locks near nu = 0.5, as the seed)",
+    )
+    mass: Literal["consistent", "lumped"] = Field(
+        "consistent", description="Mass matrix: consistent (rho int N^T N dV) or row-sum lumped"
+    )
+    viscosity: Literal["isotropic", "seed"] = Field(
+        "isotropic",
+        description="Kelvin-Voigt viscosity matrix C' (Pa s): 'isotropic' = 2 eta dev(strain "
+        "rate), rotation invariant; 'seed' = SPEC eq 4.26 literally, whose normal block is half "
+        "the isotropic one (same shear viscosity eta)",
+    )
+    corotational: bool = Field(
+        False, description="Corotational (stiffness-warping) elasticity for large rotations"
+    )
+    solver: Literal["auto", "cholmod", "superlu", "superlu_colamd"] = Field(
+        "auto",
+        description="Sparse direct solver for the constant Newmark matrix A_uu: 'auto' = CHOLMOD "
+        "(scikit-sparse) when installed else SuperLU with MMD(A^T+A) ordering; "
+        "'superlu_colamd' = scipy's default splu (baseline)",
+    )
+    energy_blowup_factor: float = Field(
+        1e3,
+        gt=1.0,
+        description="Stop when the mechanical energy (J) exceeds this factor times the larger "
+        "of its past maximum and the driving energy scale (dimensionless)",
+    )
+    corot_rtol: float = Field(
+        1e-8,
+        gt=0.0,
+        lt=1.0,
+        description="Relative residual tolerance of the corotational PCG solve (dimensionless)",
+    )
+    corot_max_iter: int = Field(
+        100, ge=1, le=10_000, description="Iteration cap of the corotational PCG solve"
+    )

@@ -1,0 +1,132 @@
+"""simulate(): driven/fixed boundary handling, quasi-static limit, corotation, guards."""
+
+import numpy as np
+import pytest
+from fem_meshes import box_mesh
+
+from physanim.fem.interp import catmull_rom
+from physanim.fem.materials import TetMaterials
+from physanim.fem.params import SimulateParams
+from physanim.fem.simulate import simulate
+from physanim.fem.statics import solve_static
+
+
+def _slab():
+    nodes, tets = box_mesh((4, 4, 2), (0.04, 0.04, 0.01))
+    fixed = np.flatnonzero(nodes[:, 2] == 0)
+    top = np.flatnonzero(np.isclose(nodes[:, 2], 0.01))
+    driven = top[np.linalg.norm(nodes[top, :2] - 0.02, axis=1) < 0.011]
+    return nodes, tets, fixed, driven
+
+
+def test_catmull_rom_interpolates_and_differentiates():
+    h = 0.1
+    t = h * np.arange(6)
+    values = np.stack([3 * t - 1, t**2], axis=1)
+    s = np.linspace(h, 4 * h, 37)[:-1]  # interior intervals: quadratics are reproduced
+    pos, vel, acc = catmull_rom(values, h, s)
+    np.testing.assert_allclose(pos, np.stack([3 * s - 1, s**2], axis=1), atol=1e-12)
+    np.testing.assert_allclose(vel, np.stack([np.full_like(s, 3), 2 * s], axis=1), atol=1e-10)
+    np.testing.assert_allclose(acc[:, 1], 2, atol=1e-8)
+    np.testing.assert_allclose(catmull_rom(values, h, t)[0], values, atol=1e-12)
+
+
+def test_driven_nodes_follow_and_fixed_nodes_stay():
+    nodes, tets, fixed, driven = _slab()
+    n_frames = 16
+    traj = np.zeros((n_frames, len(driven), 3))
+    traj[:, :, 2] = 2e-3 * np.sin(np.linspace(0, np.pi, n_frames))[:, None]
+    res = simulate(nodes, tets, TetMaterials.uniform(len(tets)), driven, traj, 1 / 30, fixed)
+    assert res.displacements.shape == (n_frames, len(nodes), 3)
+    assert res.displacements.dtype == np.float32
+    np.testing.assert_allclose(res.displacements[:, driven], traj, atol=1e-9)
+    assert np.abs(res.displacements[:, fixed]).max() == 0
+    assert res.n_substeps == 34 and res.dt == pytest.approx(1 / 30 / 34)
+    assert (np.diff(res.dissipated) >= 0).all() and res.dissipated[-1] > 0
+    assert res.strain.max() > 0 and res.max_von_mises.max() > 0
+    assert res.inverted_count.max() == 0
+
+
+def test_slow_driving_reaches_static_equilibrium():
+    nodes, tets, fixed, driven = _slab()
+    mat = TetMaterials.uniform(len(tets))
+    n_frames = 31
+    ramp = np.clip(np.linspace(0, 1.5, n_frames), 0, 1)  # ramp over 1 s, then hold 0.5 s
+    traj = np.zeros((n_frames, len(driven), 3))
+    traj[:, :, 0] = 1e-3 * ramp[:, None]
+    traj[:, :, 2] = -1e-3 * ramp[:, None]
+    res = simulate(nodes, tets, mat, driven, traj, 0.05, fixed, SimulateParams(dt=2e-3))
+    pres = (3 * np.concatenate([driven, fixed])[:, None] + np.arange(3)).ravel()
+    vals = np.concatenate([traj[-1], np.zeros((len(fixed), 3))]).ravel()
+    from physanim.fem.model import build_model
+
+    static = solve_static(build_model(nodes, tets, mat).K, pres, vals).reshape(-1, 3)
+    err = np.abs(res.displacements[-1] - static).max()
+    assert err < 0.01 * np.abs(static).max()
+    # it lags the static answer during the ramp (inertia + viscosity), not ahead of it
+    assert res.kinetic[10] > 0
+
+
+def test_corotational_matches_linear_for_small_motion_and_removes_rotation_artefacts():
+    nodes, tets, fixed, driven = _slab()
+    mat = TetMaterials.uniform(len(tets))
+    traj = np.zeros((6, len(driven), 3))
+    traj[:, :, 2] = 1e-5 * np.linspace(0, 1, 6)[:, None]
+    lin = simulate(nodes, tets, mat, driven, traj, 0.02, fixed, SimulateParams(dt=5e-3))
+    cor = simulate(
+        nodes, tets, mat, driven, traj, 0.02, fixed, SimulateParams(dt=5e-3, corotational=True)
+    )
+    rel = np.abs(cor.displacements - lin.displacements).max() / np.abs(lin.displacements).max()
+    assert rel < 1e-3
+    # a rigid 60 degree rotation prescribed on all nodes but one: no strain energy when corotated
+    angle = np.linspace(0, np.pi / 3, 6)
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    drive_all = np.arange(1, len(nodes))
+    x, y = nodes[drive_all, 0], nodes[drive_all, 1]
+    rigid = np.zeros((6, len(drive_all), 3))
+    rigid[:, :, 0] = c * x - s * y - x
+    rigid[:, :, 1] = s * x + c * y - y
+    out = {}
+    for corot in (False, True):
+        out[corot] = simulate(
+            nodes,
+            tets,
+            mat,
+            drive_all,
+            rigid,
+            0.02,
+            None,
+            SimulateParams(dt=5e-3, corotational=corot),
+        )
+    assert out[False].strain[-1] > 1e3 * max(out[True].strain[-1], 1e-12)
+    assert out[True].max_von_mises[-1] < 1e-2 * out[False].max_von_mises[-1]
+
+
+def test_inverted_elements_are_reported():
+    nodes, tets, fixed, driven = _slab()
+    traj = np.zeros((3, len(driven), 3))
+    traj[1:, :, 2] = [[-0.004], [-0.012]]  # pushes top nodes through the 1 cm slab
+    res = simulate(nodes, tets, TetMaterials.uniform(len(tets)), driven, traj, 0.02, fixed)
+    assert res.inverted_count[0] == 0 and res.inverted_count[-1] > 0
+    assert res.inverted_tets.size >= res.inverted_count[-1]
+
+
+def test_bad_inputs_are_rejected():
+    nodes, tets, fixed, driven = _slab()
+    mat = TetMaterials.uniform(len(tets))
+    with pytest.raises(ValueError, match="driven_traj"):
+        simulate(nodes, tets, mat, driven, np.zeros((5, 2, 3)), 0.02, fixed)
+    with pytest.raises(ValueError, match="share nodes"):
+        simulate(nodes, tets, mat, driven, np.zeros((5, len(driven), 3)), 0.02, driven[:2])
+    with pytest.raises(ValueError, match="nu"):
+        simulate(
+            nodes,
+            tets,
+            TetMaterials.uniform(len(tets), nu=0.5),
+            driven,
+            np.zeros((5, len(driven), 3)),
+            0.02,
+            fixed,
+        )
+    with pytest.raises(ValueError, match="inverted"):
+        simulate(nodes, tets[:, [1, 0, 2, 3]], mat, driven, np.zeros((5, len(driven), 3)), 0.02)
