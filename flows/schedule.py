@@ -13,11 +13,11 @@ from pathlib import Path
 
 from prefect import flow, get_run_logger
 
+from flows.dags import get_pipeline
 from physanim.config import ConfigError, load_config
 from physanim.pipeline import execute_plan_locally, make_plan
 from physanim.pipeline.spec import dataset_overrides
 from physanim.store import StageStore
-from tasks.pipelines import get_pipeline
 
 
 @flow(name="physanim-batch", persist_result=False)

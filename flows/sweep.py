@@ -18,11 +18,11 @@ from prefect import flow, task
 from prefect.cache_policies import NONE
 from prefect_dask import DaskTaskRunner
 
+from flows.dags import get_pipeline
 from physanim.config import load_config
 from physanim.pipeline import Pipeline, StageResult, execute_stage, make_plan
 from physanim.pipeline.sweep import Job, Variant, load_sweep, merge_plans
 from physanim.store import StageStore
-from tasks.pipelines import get_pipeline
 
 
 @dataclass(frozen=True)

@@ -53,7 +53,7 @@ ForceOpt = Annotated[
 
 
 def _pipeline(name: str) -> Pipeline:
-    from tasks.pipelines import get_pipeline
+    from flows.dags import get_pipeline
 
     try:
         return get_pipeline(name)
@@ -153,7 +153,8 @@ def run(
                 store.set_latest(e.stage, e.key)
                 _log_result(StageResult(e.stage, e.key, "cached", 0.0, {}))
         with rich_progress(console) as progress:
-            for r in pipeline_flow(dag, cfg, entries, progress):
+            named = pipeline_flow.with_options(name=f"physanim-{dag.name}")
+            for r in named(dag, cfg, entries, progress):
                 _log_result(r)
     console.print(
         f"{pipeline}: {len(todo)} stage(s) ran, {len(entries) - len(todo)} cached/skipped, "

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
+from flows.dags import FACE
 from physanim.config import load_config
 from physanim.pipeline import execute_plan_locally, make_plan
 from physanim.store import StageStore
-from tasks.pipelines import FACE
 from tests.capture.conftest import N_FRAMES
 
 

@@ -8,10 +8,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from flows.dags import KEYFRAME
 from physanim.config import load_config
 from physanim.pipeline import execute_plan_locally, make_plan
 from physanim.store import StageStore
-from tasks.pipelines import KEYFRAME
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 

@@ -7,11 +7,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from flows.dags import ARM
 from physanim.config import load_config
 from physanim.muscle.arm import ArmResult, solve_arm
 from physanim.pipeline import execute_plan_locally, make_plan
 from physanim.store import StageStore, read_dataclass
-from tasks.pipelines import ARM
 
 
 def test_arm_pipeline_stores_conditions_and_renders(tmp_path: Path) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from flows.dags import ARM
 from physanim.config import load_config
 from physanim.dynamics import inverse_dynamics
 from physanim.muscle import curves
@@ -21,7 +22,6 @@ from physanim.muscle.shape import (
 )
 from physanim.muscle.sharing import box_qp
 from physanim.muscle.trajectory import seed_trajectory
-from tasks.pipelines import ARM
 
 
 def study(condition: str, **model) -> ArmStudyParams:

@@ -1,7 +1,9 @@
 """The DAGs, declared once: they drive the CLI (run, status, dag), the Prefect flows and reports.
 
 Each stage lives in ``tasks/<stage>.py`` (its StageSpec: name, upstream, params model, code
-version, compute function).  Stages that are not implemented yet are simply absent.
+version, compute function).  Stages that are not implemented yet are simply absent.  This module
+does not import Prefect (planning and ``status`` never need it); ``pipeline_flow`` runs any of
+these DAGs as a Prefect flow named ``physanim-<dag>``, one task per stage.
 """
 
 from __future__ import annotations

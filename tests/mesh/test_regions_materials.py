@@ -1,0 +1,103 @@
+"""Facial material regions (symmetry, volume propagation) and per-tet materials files."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from pydantic import ValidationError
+
+from physanim.mesh.materials import material_table, tet_materials
+from physanim.mesh.params import REGION_NAMES, MaterialModel, MaterialsParams
+from physanim.mesh.regions import (
+    DEFAULT_LABEL,
+    LABEL_NAMES,
+    plot_regions,
+    region_areas,
+    skin_regions,
+    tet_regions,
+)
+
+MATERIALS_DIR = Path(__file__).resolve().parents[2] / "configs" / "materials"
+
+
+def side_areas(v, f, labels):
+    """Area (m^2) per region label on the actor's left (x > 0) and right (x < 0) sides."""
+    left = region_areas(v, f, np.where(v[:, 0] > 0, labels, DEFAULT_LABEL))
+    right = region_areas(v, f, np.where(v[:, 0] < 0, labels, DEFAULT_LABEL))
+    return left, right
+
+
+def test_regions_cover_the_face_symmetrically(skin, landmarks, tmp_path):
+    v, f = skin
+    labels = skin_regions(v, landmarks, MaterialsParams())
+    left, right = side_areas(v, f, labels)
+    for name in ("Cheek", "Cheilion", "cphi", "Alare"):
+        i = LABEL_NAMES.index(name)
+        assert left[i] > 0 and abs(left[i] - right[i]) <= 0.1 * max(left[i], right[i]), name
+    # cphs: the L region lies on the left, the R region is its mirror image.
+    total = region_areas(v, f, labels)
+    cl, cr = total[LABEL_NAMES.index("cphs_L")], total[LABEL_NAMES.index("cphs_R")]
+    assert cl > 0 and abs(cl - cr) <= 0.1 * max(cl, cr)
+    assert np.all(v[labels == LABEL_NAMES.index("cphs_L"), 0] > -0.005)
+    # Every region is present, and most of the face stays default.
+    assert np.all(total > 0) and total[DEFAULT_LABEL] > 0.5 * total.sum()
+    png = plot_regions(v, f, labels, tmp_path / "regions.png", landmarks)
+    assert png.stat().st_size > 10_000
+
+
+def test_tet_regions_take_the_nearest_skin_label():
+    skin_pts = np.array([[0.0, 0, 0], [0.1, 0, 0]])
+    nodes = np.array(
+        [
+            [0.0, 0, -0.01],
+            [0.01, 0, -0.02],
+            [0, 0.01, -0.02],
+            [0, 0, -0.03],
+            [0.1, 0, -0.01],
+            [0.11, 0, -0.02],
+            [0.1, 0.01, -0.02],
+            [0.1, 0, -0.03],
+        ]
+    )
+    tets = np.array([[0, 1, 2, 3], [4, 5, 6, 7]])
+    np.testing.assert_array_equal(tet_regions(nodes, tets, skin_pts, np.array([3, 5])), [3, 5])
+
+
+@pytest.mark.parametrize("name", ["uniform", "model1", "model2", "model3"])
+def test_shipped_materials_files_are_valid(name):
+    model = MaterialModel.model_validate(
+        yaml.safe_load((MATERIALS_DIR / f"{name}.yaml").read_text())
+    )
+    table = material_table(model)
+    assert table.shape == (1 + len(REGION_NAMES), 4)
+    np.testing.assert_allclose(table[0], [192.4e3, 0.495, 476.8, 1100.0])  # seed uniform values
+    np.testing.assert_allclose(table[:, 1], 0.495)
+    np.testing.assert_allclose(table[:, 3], 1100.0)
+
+
+def test_seed_model_values_per_tet():
+    load = lambda n: MaterialModel.model_validate(  # noqa: E731
+        yaml.safe_load((MATERIALS_DIR / f"{n}.yaml").read_text())
+    )
+    labels = np.arange(1 + len(REGION_NAMES))  # default, Cheek, cphs_L, cphs_R, ...
+    m1, m2, m3 = (tet_materials(labels, load(n)) for n in ("model1", "model2", "model3"))
+    np.testing.assert_allclose(
+        m1.E_Pa[1:], np.array([162.7, 148.9, 148.9, 116.5, 169.0, 216.9]) * 1e3
+    )
+    np.testing.assert_allclose(m1.eta_Pa_s[1:], [430.3, 408.6, 408.6, 362.9, 453.0, 434.3])
+    cphs_r = 1 + REGION_NAMES.index("cphs_R")
+    assert (m2.E_Pa[cphs_r], m2.eta_Pa_s[cphs_r]) == (205.6e3, 427.8)
+    assert (m3.E_Pa[cphs_r], m3.eta_Pa_s[cphs_r]) == (92.2e3, 389.4)
+    others = np.arange(len(labels)) != cphs_r
+    np.testing.assert_array_equal(m2.E_Pa[others], m1.E_Pa[others])
+
+
+def test_bad_materials_are_rejected_with_the_field_named():
+    base = {"name": "x", "default": {"E_kPa": 1.0, "nu": 0.3, "eta_Pa_s": 1.0, "rho_kg_m3": 1e3}}
+    with pytest.raises(ValidationError, match="unknown region"):
+        MaterialModel.model_validate({**base, "regions": {"Chin": base["default"]}})
+    with pytest.raises(ValidationError, match="nu"):
+        MaterialModel.model_validate({**base, "default": {**base["default"], "nu": 0.5}})
+    with pytest.raises(ValueError, match="tet_labels"):
+        tet_materials(np.array([9]), MaterialModel.model_validate(base))

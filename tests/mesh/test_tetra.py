@@ -1,0 +1,122 @@
+"""Tissue volume, tetrahedralisation, quality report and node labels."""
+
+import numpy as np
+import pytest
+
+from physanim.face.landmarks import FEATURE_POINTS
+from physanim.mesh.params import TetraParams
+from physanim.mesh.tetra import (
+    TetMeshError,
+    aspect_ratios,
+    boundary_faces,
+    dihedral_angles,
+    label_nodes,
+    orient_and_check,
+    tet_volumes,
+    tetrahedralize_surface,
+)
+from physanim.mesh.tissue import PART_BONE, PART_SKIN, build_tissue_surface, thickness_map
+from physanim.mesh.topology import watertight_problems
+
+REGULAR = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=float)
+
+
+def test_regular_tet_quality_is_analytic():
+    tets = np.array([[0, 1, 2, 3]])
+    tets, flipped = orient_and_check(REGULAR, tets, TetraParams())
+    assert tet_volumes(REGULAR, tets)[0] == pytest.approx(8.0 / 3.0)  # edge 2*sqrt(2)
+    np.testing.assert_allclose(dihedral_angles(REGULAR, tets), np.degrees(np.arccos(1 / 3)))
+    assert aspect_ratios(REGULAR, tets)[0] == pytest.approx(1.0)
+    assert flipped == 1  # the input order was negative
+
+
+def test_degenerate_tets_are_rejected():
+    flat = REGULAR.copy()
+    flat[:, 2] = 0.0
+    with pytest.raises(TetMeshError, match="degenerate"):
+        orient_and_check(flat, np.array([[0, 1, 2, 3]]), TetraParams())
+
+
+def box_surface(size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closed outward-oriented box surface: (8, 3) metres, (12, 3)."""
+    v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float) * size
+    f = np.array(
+        [
+            [0, 1, 3],
+            [0, 3, 2],
+            [4, 6, 7],
+            [4, 7, 5],
+            [0, 4, 5],
+            [0, 5, 1],
+            [2, 3, 7],
+            [2, 7, 6],
+            [0, 2, 6],
+            [0, 6, 4],
+            [1, 5, 7],
+            [1, 7, 3],
+        ]
+    )
+    return v, f
+
+
+def test_box_tetrahedralisation_fills_its_volume_within_the_envelope():
+    size = np.array([0.04, 0.03, 0.02])
+    v, f = box_surface(size)
+    assert watertight_problems(f) == []
+    params = TetraParams(edge_length_m=0.008)
+    mesh, q = tetrahedralize_surface(v, f, params)
+    assert np.all(tet_volumes(mesh.nodes, mesh.tets) > 0)
+    # fTetWild keeps the surface within epsilon_rel * bbox diagonal of the input.
+    envelope = params.epsilon_rel * np.linalg.norm(size)
+    area = 2 * (size[0] * size[1] + size[1] * size[2] + size[0] * size[2])
+    assert abs(q.volume_m3 - np.prod(size)) <= area * envelope
+    assert q.volume_m3 == pytest.approx(np.prod(size), rel=0.01)
+    assert 0 < q.min_dihedral_deg < q.median_dihedral_deg < 180
+    # The boundary of the tet mesh is closed and encloses the same volume.
+    bf = boundary_faces(mesh.tets)
+    assert watertight_problems(bf) == []
+    t = mesh.nodes[bf]
+    enclosed = np.einsum("fi,fi->", t[:, 0], np.cross(t[:, 1], t[:, 2])) / 6
+    assert enclosed == pytest.approx(q.volume_m3, rel=1e-9)
+
+
+def test_open_surface_is_reported():
+    v, f = box_surface(np.ones(3))
+    assert any("open" in p for p in watertight_problems(f[:-1]))
+
+
+def test_thickness_map_follows_the_named_areas(skin, landmarks):
+    v, _ = skin
+    p = TetraParams()
+    t = thickness_map(np.array([landmarks[n] for n in FEATURE_POINTS]), landmarks, p)
+    t = dict(zip(FEATURE_POINTS, t, strict=True))
+    assert t["cheek_L"] == pytest.approx(p.thickness_cheek_m, abs=1e-3)
+    assert t["glabella"] < p.thickness_default_m
+    forehead = thickness_map(landmarks["glabella"][None] + [0, 0.03, 0], landmarks, p)
+    assert forehead[0] == pytest.approx(p.thickness_forehead_m, abs=1e-4)
+    assert np.all(
+        (thickness_map(v, landmarks, p) >= 0.01) & (thickness_map(v, landmarks, p) <= 0.02)
+    )
+
+
+def test_coarse_face_tets_are_positive_and_labelled(skin, landmarks):
+    params = TetraParams(surface_edge_length_m=0.006, edge_length_m=0.009)
+    surface = build_tissue_surface(*skin, landmarks, params)
+    assert watertight_problems(surface.faces) == []
+    mesh, q = tetrahedralize_surface(surface.vertices, surface.faces, params)
+    assert np.all(tet_volumes(mesh.nodes, mesh.tets) > 0)
+    assert q.n_tets == len(mesh.tets) and q.min_dihedral_deg > 1.0
+    # Volume within fTetWild's envelope of the enclosed volume.
+    assert q.volume_m3 == pytest.approx(surface.enclosed_volume(), rel=0.03)
+    # Scaled from the default range (5-10k nodes at the default edge length) to this one.
+    scale = (TetraParams().edge_length_m / params.edge_length_m) ** 3
+    assert 5_000 * scale * 0.5 <= q.n_nodes <= 10_000 * scale * 1.5
+    lm = np.array([landmarks[n] for n in FEATURE_POINTS])
+    labels = label_nodes(mesh, surface, lm, params)
+    assert labels.skin.sum() > 0 and labels.bone.sum() > 0
+    assert not np.any(labels.skin & labels.bone)
+    assert labels.skin[labels.landmark_node].all()
+    assert labels.landmark_distance.max() < params.edge_length_m
+    # Skin nodes sit in front of bone nodes: larger z on average (actor frame, +z out).
+    assert mesh.nodes[labels.skin, 2].mean() > mesh.nodes[labels.bone, 2].mean()
+    assert set(np.unique(surface.part)) == {PART_SKIN, PART_BONE, 2}
