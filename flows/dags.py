@@ -13,13 +13,35 @@ from pathlib import Path
 
 from physanim.capture.params import DemoParams
 from physanim.pipeline import Pipeline
-from tasks import arm_render, fit, ingest, keyframe_render, keyframes, muscles, track
+from tasks import (
+    align,
+    arm_render,
+    evaluate,
+    fit,
+    ingest,
+    keyframe_render,
+    keyframes,
+    materials,
+    muscles,
+    simulate,
+    tetra,
+    track,
+)
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
 FACE = Pipeline(
     name="face",
-    stages=(ingest.SPEC, track.SPEC, fit.SPEC),
+    stages=(
+        ingest.SPEC,
+        track.SPEC,
+        fit.SPEC,
+        align.SPEC,
+        tetra.SPEC,
+        materials.SPEC,
+        simulate.SPEC,
+        evaluate.SPEC,
+    ),
     default_config=CONFIGS / "default.yaml",
     extra_sections={"demo": DemoParams},
     prepare=ingest.ensure_demo,

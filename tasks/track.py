@@ -1,9 +1,10 @@
-"""Stage ``track``: painted markers tracked in the colour frames and lifted to 3D with depth."""
+"""Stage ``track``: landmarks tracked in the colour frames (painted markers or markerless) in 3D."""
 
 from __future__ import annotations
 
 import hashlib
 from collections.abc import Mapping
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -12,18 +13,24 @@ from physanim.tracking.params import TrackParams
 
 
 class TrackStageParams(TrackParams):
-    """Tracking settings plus the marker template (path relative to the dataset directory)."""
+    """Tracking settings, the marker template and how markers are lifted to 3D."""
 
     model_config = ConfigDict(extra="forbid")
     template: str = Field(
         "ground_truth.zarr", description="marker template: JSON or Zarr, relative to the dataset"
     )
+    lift: Literal["depth", "stereo"] = Field(
+        "depth", description="3D from the ingested depth, or by triangulating the stereo pair"
+    )
+    stereo_dir: str = Field("stereo", description="stereo pair folder, relative to the dataset")
 
 
 def fingerprint(dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]:
     """Content hash of the marker template (names and neutral positions)."""
     from physanim.tracking.template import load_marker_template
 
+    if params.backend == "markerless":  # type: ignore[attr-defined]
+        return {"template": "face model"}
     path = dataset.path / params.template  # type: ignore[attr-defined]
     if not path.exists():
         return {"template": "missing"}
@@ -34,24 +41,37 @@ def fingerprint(dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]:
 
 def compute(ctx: StageContext) -> None:
     """uv (T,K,2) px, points (T,K,3) m camera frame, confidence (T,K), head_pose (T,4,4)."""
+    from physanim.face.landmarks import FEATURE_POINTS
     from physanim.tracking.template import load_marker_template
-    from physanim.tracking.track import track_markers_rgbd
 
     params: TrackStageParams = ctx.params  # type: ignore[assignment]
-    names, template = load_marker_template(ctx.dataset_dir / params.template)
-    cap = ctx.input("ingest")
-    tracks = track_markers_rgbd(
-        cap["color"][...],
-        cap["depth"][...],
-        cap["K"][...],
-        template,
-        float(cap.attrs["fps"]),
-        TrackParams.model_validate(params.model_dump(exclude={"template"})),
-        ctx.progress("track"),
+    tracking = TrackParams.model_validate(
+        params.model_dump(exclude={"template", "lift", "stereo_dir"})
     )
+    cap = ctx.input("ingest")
+    fps = float(cap.attrs["fps"])
+    progress = ctx.progress("track")
+    if params.backend == "markerless":
+        from physanim.tracking.markerless import feature_template, track_markerless_rgbd
+
+        names, template = list(FEATURE_POINTS), feature_template()
+        frames = (cap["color"][...], cap["depth"][...], cap["K"][...])
+        tracks = track_markerless_rgbd(*frames, fps, tracking, progress)
+    elif params.lift == "stereo":
+        from physanim.tracking.stereo_track import read_stereo_pairs, track_markers_stereo
+
+        names, template = load_marker_template(ctx.dataset_dir / params.template)
+        lefts, rights, calib = read_stereo_pairs(ctx.dataset_dir / params.stereo_dir)
+        tracks = track_markers_stereo(lefts, rights, calib, template, fps, tracking, progress)
+    else:
+        from physanim.tracking.track import track_markers_rgbd
+
+        names, template = load_marker_template(ctx.dataset_dir / params.template)
+        frames = (cap["color"][...], cap["depth"][...], cap["K"][...])
+        tracks = track_markers_rgbd(*frames, template, fps, tracking, progress)
     ctx.write_record(tracks)
     ctx.write("template", template)
-    ctx.out.attrs["names"] = names
+    ctx.out.attrs.update(names=names, fps=fps, backend=params.backend, lift=params.lift)
     seen = tracks.confidence > 0
     ctx.summary.update(markers=len(names), tracked_fraction=round(float(seen.mean()), 4))
 
@@ -62,6 +82,6 @@ SPEC = StageSpec(
     params=TrackStageParams,
     version="1",
     compute=compute,
-    doc="marker detection, labelling, LK tracking, depth lifting, smoothing",
+    doc="markers (or markerless face mesh) tracked in 2D, lifted to 3D (depth/stereo), smoothed",
     fingerprint=fingerprint,
 )

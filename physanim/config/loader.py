@@ -112,14 +112,36 @@ def parse_override(text: str) -> dict[str, Any]:
     return tree
 
 
+def _merge_file(
+    tree: dict[str, Any], path: Path, origins: dict[str, str], seen: tuple[Path, ...]
+) -> None:
+    """Merge one file, after the files its ``include:`` list names (relative to it)."""
+    data = load_yaml(path)
+    includes = data.pop("include", [])
+    if isinstance(includes, str):
+        includes = [includes]
+    if not isinstance(includes, list) or not all(isinstance(i, str) for i in includes):
+        raise ConfigError(f"{path}: include must be a file name or a list of file names")
+    for inc in includes:
+        target = (path.parent / inc).resolve()
+        if target in seen:
+            raise ConfigError(f"{path}: include cycle through {target}")
+        _merge_file(tree, target, origins, (*seen, target))
+    _merge(tree, data, str(path), origins)
+
+
 def merge_sources(
     files: Iterable[str | Path], overrides: Iterable[str] = ()
 ) -> tuple[dict[str, Any], dict[str, str]]:
-    """Merge files then overrides; returns (raw tree, origin of each dotted key)."""
+    """Merge files then overrides; returns (raw tree, origin of each dotted key).
+
+    A file may start with ``include: [other.yaml, ...]`` (paths relative to it); the included
+    files are merged first, then the file itself.
+    """
     tree: dict[str, Any] = {}
     origins: dict[str, str] = {}
     for f in files:
-        _merge(tree, load_yaml(f), str(f), origins)
+        _merge_file(tree, Path(f), origins, (Path(f).resolve(),))
     for o in overrides:
         _merge(tree, parse_override(o), f"--set {o}", origins)
     return tree, origins

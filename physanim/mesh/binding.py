@@ -7,8 +7,9 @@ onto the triangle accordingly; the triangle giving the smallest distance wins (e
 The seed projects onto an edge's infinite line (eq 4.9); here the edge parameter is clamped to
 ``[0, 1]`` and, outside the face region, the nearest of the three clamped edge points is kept,
 which is the exact closest point for every triangle shape (the seed's rule is exact only for
-acute triangles). Candidate triangles come from a ``cKDTree`` over triangle centroids; the search
-is widened until a bound proves that no farther triangle can be closer, so the result equals the
+acute triangles). Candidate triangles come from a ``cKDTree`` over sample points spread over
+every triangle (a barycentric grid, at most ``h`` from any point of its triangle); the search is
+widened until a bound proves that no farther triangle can be closer, so the result equals the
 brute-force minimum over all triangles.
 """
 
@@ -119,6 +120,27 @@ def closest_points_on_triangles(
     return weights, d2, region.astype(np.int8)
 
 
+def _triangle_samples(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Barycentric-grid samples over triangles (F, 3, 3).
+
+    Returns samples (S, 3), their triangle (S,), and h: every point of a triangle lies within h
+    of one of its own samples (the longest edge of a grid cell).
+    """
+    longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
+    # About 20k samples in all on meshes of uniform triangle size, at least the corners.
+    n_target = max(1, int(np.sqrt(2.0 * 20_000 / len(tri))))
+    spacing = float(np.median(longest)) / n_target
+    n_sub = np.clip(np.ceil(longest / max(spacing, 1e-300)), 1, 64).astype(np.int64)
+    samples, owner = [], []
+    for n in np.unique(n_sub):  # a few distinct subdivision levels, not a loop over triangles
+        i, j = np.nonzero(np.add.outer(np.arange(n + 1), np.arange(n + 1)) <= n)
+        bary = np.c_[n - i - j, i, j] / n  # (G, 3)
+        sel = np.nonzero(n_sub == n)[0]
+        samples.append(np.einsum("gc,fcd->fgd", bary, tri[sel]).reshape(-1, 3))
+        owner.append(np.repeat(sel, len(bary)))
+    return np.concatenate(samples), np.concatenate(owner), float(np.max(longest / n_sub))
+
+
 def bind_points(
     points: np.ndarray,
     vertices: np.ndarray,
@@ -131,8 +153,8 @@ def bind_points(
         points: (N, 3) query points (scan vertices), metres.
         vertices: (V, 3) mesh vertices (motion mesh at the neutral frame), metres.
         faces: (F, 3) int triangle indices into ``vertices``.
-        candidates: initial number of nearest-centroid candidate triangles per point; the search
-            widens automatically where it cannot prove the answer exact.
+        candidates: initial number of nearest triangle samples per point; the search widens
+            automatically where it cannot prove the answer exact.
 
     Returns:
         The :class:`Binding` (exact minimum over all triangles).
@@ -145,11 +167,9 @@ def bind_points(
         raise ValueError(f"candidates must be >= 1, got {candidates}")
 
     tri = vertices[faces]  # (F, 3, 3)
-    centroids = tri.mean(axis=1)
-    # Any point of a triangle lies within r_max of its centroid.
-    r_max = float(np.linalg.norm(tri - centroids[:, None, :], axis=2).max())
-    tree = cKDTree(centroids)
-    n_tri = len(faces)
+    samples, owner, h = _triangle_samples(tri)
+    tree = cKDTree(samples)
+    n_samples, n_tri = len(samples), len(faces)
 
     n = len(points)
     triangle = np.zeros(n, dtype=np.int64)
@@ -157,28 +177,29 @@ def bind_points(
     d2 = np.zeros(n)
     region = np.zeros(n, dtype=np.int8)
     todo = np.arange(n)
-    k = min(candidates, n_tri)
+    k = min(candidates, n_samples)
     while len(todo):
-        cdist, cidx = tree.query(points[todo], k=k)
-        cdist = cdist.reshape(len(todo), k)
-        cidx = cidx.reshape(len(todo), k)
-        t = tri[cidx]  # (M, k, 3, 3)
-        w, dd, rg = closest_points_on_triangles(
-            points[todo, None, :], t[:, :, 0], t[:, :, 1], t[:, :, 2]
-        )
-        best = np.argmin(dd, axis=1)
-        rows = np.arange(len(todo))
-        triangle[todo] = cidx[rows, best]
-        weights[todo] = w[rows, best]
-        d2[todo] = dd[rows, best]
-        region[todo] = rg[rows, best]
-        # Exact when every unvisited triangle is provably farther: its centroid is at least the
-        # k-th centroid distance away, so its points are at least (that - r_max) away.
-        if k == n_tri:
+        sdist, sidx = tree.query(points[todo], k=k)
+        sdist = sdist.reshape(len(todo), k)
+        cand = owner[sidx.reshape(len(todo), k)]  # (M, k) candidate triangles, with repeats
+        # Unique (point, triangle) pairs, sorted by point.
+        pairs = np.unique(np.arange(len(todo))[:, None] * n_tri + cand)
+        row, tri_id = pairs // n_tri, pairs % n_tri
+        t = tri[tri_id]  # (P, 3, 3)
+        w, dd, rg = closest_points_on_triangles(points[todo[row]], t[:, 0], t[:, 1], t[:, 2])
+        order = np.lexsort((dd, row))  # by point, then distance
+        first = order[np.r_[True, row[order][1:] != row[order][:-1]]]  # (M,) nearest per point
+        triangle[todo] = tri_id[first]
+        weights[todo] = w[first]
+        d2[todo] = dd[first]
+        region[todo] = rg[first]
+        # Exact when every unvisited triangle is provably farther: all its samples are at least
+        # the k-th sample distance away, and each of its points is within h of a sample.
+        if k == n_samples:
             break
-        proven = np.sqrt(d2[todo]) <= cdist[:, -1] - r_max
+        proven = np.sqrt(d2[todo]) <= sdist[:, -1] - h
         todo = todo[~proven]
-        k = min(2 * k, n_tri)
+        k = min(4 * k, n_samples)
 
     closest = np.einsum("nc,ncd->nd", weights, tri[triangle])
     return Binding(

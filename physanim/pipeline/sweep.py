@@ -35,6 +35,7 @@ class NamedVariant(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     name: str = Field(min_length=1)
+    configs: list[str] = Field(default_factory=list, description="extra -c files")
     set: dict[str, Any] = Field(default_factory=dict)
 
 
@@ -67,15 +68,15 @@ def _sets(mapping: dict[str, Any]) -> list[str]:
 def load_sweep(path: str | Path) -> tuple[SweepFile, list[Variant]]:
     """Read and validate a sweep file and expand it into variants (datasets x grid x list)."""
     spec = validate(SweepFile, *merge_sources([path]))
-    combos: list[tuple[str, dict[str, Any]]] = []
+    combos: list[tuple[str, list[str], dict[str, Any]]] = []
     if spec.grid:
         keys = list(spec.grid)
         for values in itertools.product(*(spec.grid[k] for k in keys)):
             name = ",".join(f"{k}={v}" for k, v in zip(keys, values, strict=True))
-            combos.append((name, dict(zip(keys, values, strict=True))))
-    combos += [(v.name, v.set) for v in spec.variants]
+            combos.append((name, [], dict(zip(keys, values, strict=True))))
+    combos += [(v.name, v.configs, v.set) for v in spec.variants]
     if not combos:
-        combos = [("base", {})]
+        combos = [("base", [], {})]
     names = [c[0] for c in combos]
     if len(set(names)) != len(names):
         raise ConfigError(f"{path}: variant names must be unique, got {names}")
@@ -83,11 +84,11 @@ def load_sweep(path: str | Path) -> tuple[SweepFile, list[Variant]]:
         Variant(
             name=name if len(spec.datasets) == 1 else f"{ds}:{name}",
             dataset=ds,
-            configs=tuple(spec.configs),
+            configs=(*spec.configs, *files),
             overrides=tuple(dataset_overrides(ds) + _sets(spec.set) + _sets(over)),
         )
         for ds in spec.datasets
-        for name, over in combos
+        for name, files, over in combos
     ]
     return spec, variants
 

@@ -12,8 +12,10 @@ class TrackParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    backend: Literal["markers"] = Field(
-        "markers", description="landmark source: painted markers (the only backend so far)"
+    backend: Literal["markers", "markerless"] = Field(
+        "markers",
+        description="landmark source: painted markers, or markerless (MediaPipe face mesh, "
+        "needs the markerless extra)",
     )
     marker_rgb: tuple[float, float, float] = Field(
         (0.22, 0.36, 0.42), description="albedo of the painted dots, linear RGB in [0, 1]"
@@ -48,4 +50,19 @@ class TrackParams(BaseModel):
     )
     kalman_meas_std: float = Field(
         0.0005, gt=0.0, description="Kalman measurement noise std of a 3D marker (m)"
+    )
+    markerless_min_detection: float = Field(
+        0.5, gt=0.0, lt=1.0, description="markerless: min face-detector score (probability)"
+    )
+    markerless_min_presence: float = Field(
+        0.5, gt=0.0, lt=1.0, description="markerless: min face-mesh presence score (probability)"
+    )
+    stereo_row_band_px: float = Field(
+        2.0, gt=0.0, description="stereo: max row difference of a left/right match (px)"
+    )
+    stereo_max_disparity_px: float = Field(
+        400.0, gt=0.0, description="stereo: largest disparity searched (px)"
+    )
+    stereo_disparity_jump_px: float = Field(
+        6.0, gt=0.0, description="stereo: max disparity change of a marker between frames (px)"
     )

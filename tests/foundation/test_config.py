@@ -79,3 +79,15 @@ def test_override_syntax() -> None:
         parse_override("simulate.dt")
     with pytest.raises(ConfigError, match="is not a dotted key"):
         parse_override("simulate..dt=1")
+
+
+def test_include_merges_first_and_detects_cycles(model, toy_config, tmp_path) -> None:
+    write(tmp_path, "base.yaml", "scale:\n  factor: 3.0\nsource:\n  n_frames: 5\n")
+    top = write(tmp_path, "top.yaml", "include: base.yaml\nscale:\n  factor: 4.0\n")
+    cfg, origins = load_config(model, [toy_config, top])
+    assert (cfg.scale.factor, cfg.source.n_frames) == (4.0, 5)
+    assert origins["source.n_frames"] == str((tmp_path / "base.yaml").resolve())
+    write(tmp_path, "a.yaml", "include: b.yaml\n")
+    write(tmp_path, "b.yaml", "include: a.yaml\n")
+    with pytest.raises(ConfigError, match="include cycle"):
+        load_config(model, [toy_config, tmp_path / "a.yaml"])

@@ -67,7 +67,7 @@ def test_tet_regions_take_the_nearest_skin_label():
 @pytest.mark.parametrize("name", ["uniform", "model1", "model2", "model3"])
 def test_shipped_materials_files_are_valid(name):
     model = MaterialModel.model_validate(
-        yaml.safe_load((MATERIALS_DIR / f"{name}.yaml").read_text())
+        yaml.safe_load((MATERIALS_DIR / f"{name}.yaml").read_text())["materials"]["model"]
     )
     table = material_table(model)
     assert table.shape == (1 + len(REGION_NAMES), 4)
@@ -78,19 +78,17 @@ def test_shipped_materials_files_are_valid(name):
 
 def test_seed_model_values_per_tet():
     load = lambda n: MaterialModel.model_validate(  # noqa: E731
-        yaml.safe_load((MATERIALS_DIR / f"{n}.yaml").read_text())
+        yaml.safe_load((MATERIALS_DIR / f"{n}.yaml").read_text())["materials"]["model"]
     )
     labels = np.arange(1 + len(REGION_NAMES))  # default, Cheek, cphs_L, cphs_R, ...
     m1, m2, m3 = (tet_materials(labels, load(n)) for n in ("model1", "model2", "model3"))
-    np.testing.assert_allclose(
-        m1.E_Pa[1:], np.array([162.7, 148.9, 148.9, 116.5, 169.0, 216.9]) * 1e3
-    )
-    np.testing.assert_allclose(m1.eta_Pa_s[1:], [430.3, 408.6, 408.6, 362.9, 453.0, 434.3])
+    np.testing.assert_allclose(m1.E[1:], np.array([162.7, 148.9, 148.9, 116.5, 169.0, 216.9]) * 1e3)
+    np.testing.assert_allclose(m1.eta[1:], [430.3, 408.6, 408.6, 362.9, 453.0, 434.3])
     cphs_r = 1 + REGION_NAMES.index("cphs_R")
-    assert (m2.E_Pa[cphs_r], m2.eta_Pa_s[cphs_r]) == (205.6e3, 427.8)
-    assert (m3.E_Pa[cphs_r], m3.eta_Pa_s[cphs_r]) == (92.2e3, 389.4)
+    assert (m2.E[cphs_r], m2.eta[cphs_r]) == (205.6e3, 427.8)
+    assert (m3.E[cphs_r], m3.eta[cphs_r]) == (92.2e3, 389.4)
     others = np.arange(len(labels)) != cphs_r
-    np.testing.assert_array_equal(m2.E_Pa[others], m1.E_Pa[others])
+    np.testing.assert_array_equal(m2.E[others], m1.E[others])
 
 
 def test_bad_materials_are_rejected_with_the_field_named():

@@ -1,0 +1,52 @@
+"""Per-run measures of a face animation: landmark curves, peaks, driven/free lag, truth errors."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from physanim.evaluate.symmetry import displacement_curves, lag_frames, symmetry_cost
+from physanim.mesh.binding import bind_points
+
+
+@dataclass(frozen=True)
+class LandmarkMeasures:
+    """Measures of landmark trajectories (T, K, 3) m.
+
+    ``cost`` (T,) symmetry cost (natural log), ``e_left``/``e_right`` (T,); ``displacement``
+    (T, K) m from frame 0; ``peak`` (K,) m and ``peak_frame`` (K,) of each landmark.
+    """
+
+    cost: NDArray
+    e_left: NDArray
+    e_right: NDArray
+    displacement: NDArray
+    peak: NDArray
+    peak_frame: NDArray
+
+
+def landmark_measures(points: NDArray, names: Sequence[str]) -> LandmarkMeasures:
+    """Symmetry cost and displacement curves of named landmark trajectories (T, K, 3) m."""
+    cost, e_l, e_r = symmetry_cost(points, names)
+    disp = displacement_curves(points)
+    return LandmarkMeasures(cost, e_l, e_r, disp, disp.max(axis=0), disp.argmax(axis=0))
+
+
+def driven_free_lag(displacements: NDArray, driven: NDArray, free: NDArray, max_lag: int) -> int:
+    """Frames by which free nodes' mean displacement trails the driven nodes' (T, n, 3) m."""
+    mag = np.linalg.norm(displacements, axis=-1)
+    return lag_frames(mag[:, driven].mean(axis=1), mag[:, free].mean(axis=1), max_lag)
+
+
+def surface_error(
+    points: NDArray, truth_vertices: NDArray, truth_faces: NDArray, frames: Sequence[int]
+) -> NDArray:
+    """RMS distance (len(frames),) m of points (T, N, 3) to the true surface (T, V, 3) per frame."""
+    out = []
+    for t in frames:
+        d = bind_points(points[t], truth_vertices[t], truth_faces).distance
+        out.append(np.sqrt(np.mean(d**2)))
+    return np.asarray(out)

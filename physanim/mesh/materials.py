@@ -1,0 +1,30 @@
+"""Per-tet material constants from region labels and a materials file (:class:`MaterialModel`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physanim.fem.materials import TetMaterials
+from physanim.mesh.params import REGION_NAMES, MaterialModel
+
+
+def material_table(model: MaterialModel) -> np.ndarray:
+    """(1 + len(REGION_NAMES), 4) rows [E Pa, nu, eta Pa*s, rho kg/m^3] per region label
+    (row 0 default; regions absent from the file take the default values)."""
+    rows = []
+    for name in ("default", *REGION_NAMES):
+        m = model.regions.get(name, model.default)
+        rows.append([m.E_kPa * 1e3, m.nu, m.eta_Pa_s, m.rho_kg_m3])
+    return np.asarray(rows)
+
+
+def tet_materials(tet_labels: np.ndarray, model: MaterialModel) -> TetMaterials:
+    """Constants (m,) per tet from region labels (m,) (0 default, i+1 = REGION_NAMES[i])."""
+    labels = np.asarray(tet_labels, dtype=np.int64)
+    table = material_table(model)
+    if labels.size and (labels.min() < 0 or labels.max() >= len(table)):
+        raise ValueError(
+            f"tet_labels must lie in [0, {len(table)}), got [{labels.min()}, {labels.max()}]"
+        )
+    values = table[labels]
+    return TetMaterials(E=values[:, 0], nu=values[:, 1], eta=values[:, 2], rho=values[:, 3])

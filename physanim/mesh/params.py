@@ -1,0 +1,198 @@
+"""Parameters of the mesh stages (align, tetra, materials) and the materials-file model."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+#: Facial material regions of seed 004 (Tables 6.4-6.5); every other skin point is "default".
+REGION_NAMES: tuple[str, ...] = ("Cheek", "cphs_L", "cphs_R", "Cheilion", "cphi", "Alare")
+
+#: Feature points (physanim.face.landmarks names) that seed each region.
+REGION_LANDMARKS: dict[str, tuple[str, ...]] = {
+    "Cheek": ("cheek_L", "cheek_R"),
+    "cphs_L": ("cphs_L",),
+    "cphs_R": ("cphs_R",),
+    "Cheilion": ("ch_L", "ch_R"),
+    "cphi": ("cphi_L", "cphi_R"),
+    "Alare": ("al_L", "al_R"),
+}
+
+
+class AlignParams(BaseModel):
+    """Scan preparation, alignment and binding (the ``align`` stage)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    remesh_edge_length_m: float = Field(
+        0.7e-3,
+        gt=1e-4,
+        le=2e-2,
+        description="Target edge length of the isotropic scan remesh, metres "
+        "(0.7 mm gives ~20-30k vertices on the cropped demo face).",
+    )
+    remesh_iterations: int = Field(
+        6, ge=1, le=50, description="Isotropic remeshing iterations (count)."
+    )
+    scaling: Literal["similarity", "per_axis"] = Field(
+        "per_axis",
+        description="'similarity': Umeyama rotation + uniform scale; 'per_axis': rigid Umeyama "
+        "then the seed's per-axis scaling about the nose tip (SPEC eqs 5.1-5.4).",
+    )
+    refine_iterations: int = Field(
+        3, ge=0, le=50, description="Non-rigid refinement iterations (count; 0 disables)."
+    )
+    refine_smoothness: float = Field(
+        0.1,
+        ge=0.0,
+        description="Weight of the Laplacian regulariser of the refinement displacement "
+        "(dimensionless; larger keeps the wireframe shape).",
+    )
+    refine_max_distance_m: float = Field(
+        0.01,
+        gt=0.0,
+        description="Wireframe vertices farther than this from the scan are not pulled, metres.",
+    )
+    binding_candidates: int = Field(
+        8, ge=1, le=256, description="Initial candidate triangles per scan vertex (count)."
+    )
+
+
+class TetraParams(BaseModel):
+    """Soft-tissue volume and tetrahedralisation (the ``tetra`` stage)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    thickness_default_m: float = Field(
+        0.015, gt=0.0, le=0.05, description="Tissue thickness away from named areas, metres."
+    )
+    thickness_forehead_m: float = Field(
+        0.010, gt=0.0, le=0.05, description="Tissue thickness above the glabella, metres."
+    )
+    thickness_nose_bridge_m: float = Field(
+        0.010,
+        gt=0.0,
+        le=0.05,
+        description="Tissue thickness along the nose bridge (glabella to pronasale), metres.",
+    )
+    thickness_cheek_m: float = Field(
+        0.020, gt=0.0, le=0.05, description="Tissue thickness at the cheek points, metres."
+    )
+    thickness_falloff_m: float = Field(
+        0.02,
+        gt=0.0,
+        le=0.2,
+        description="Gaussian radius over which named thicknesses blend into the default, metres.",
+    )
+    normal_smoothing_iterations: int = Field(
+        40,
+        ge=0,
+        le=1000,
+        description="Laplacian smoothing passes of the offset normals and thickness (count).",
+    )
+    surface_edge_length_m: float = Field(
+        0.0025,
+        gt=1e-4,
+        le=0.05,
+        description="Edge length of the skin surface remesh fed to fTetWild, metres.",
+    )
+    edge_length_m: float = Field(
+        0.0035, gt=1e-4, le=0.05, description="Target tetrahedron edge length, metres."
+    )
+    epsilon_rel: float = Field(
+        1e-2,
+        gt=0.0,
+        le=0.05,
+        description="fTetWild envelope: max surface deviation relative to the bounding-box "
+        "diagonal (dimensionless).",
+    )
+    optimize: bool = Field(True, description="Let fTetWild optimise tet quality (slower).")
+    stop_energy: float = Field(
+        20.0,
+        gt=3.0,
+        le=1e3,
+        description="fTetWild stops optimising once the conformal AMIPS energy is below this "
+        "(dimensionless; 3 = all regular).",
+    )
+    max_opt_iterations: int = Field(
+        30, ge=1, le=200, description="fTetWild optimisation passes at most (count)."
+    )
+    sliver_dihedral_deg: float = Field(
+        5.0, gt=0.0, lt=60.0, description="Tets with a dihedral angle below this are slivers, deg."
+    )
+    degenerate_volume_rel: float = Field(
+        1e-9,
+        gt=0.0,
+        description="Tets with |volume| below this times edge_length_m^3 are degenerate "
+        "(dimensionless).",
+    )
+    label_tolerance_rel: float = Field(
+        0.3,
+        gt=0.0,
+        le=2.0,
+        description="Boundary nodes within this times edge_length_m of the skin (bone) surface "
+        "are labelled skin (bone) nodes (dimensionless).",
+    )
+
+
+class MaterialsParams(BaseModel):
+    """Facial-region geometry (the ``materials`` stage); values come from a materials file."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    radius_cheek_m: float = Field(
+        0.012, gt=0.0, le=0.1, description="Radius of the Cheek regions about cheek_L/R, metres."
+    )
+    radius_cphs_m: float = Field(
+        0.008, gt=0.0, le=0.1, description="Radius of cphs_L / cphs_R about their points, metres."
+    )
+    radius_cheilion_m: float = Field(
+        0.010, gt=0.0, le=0.1, description="Radius of the Cheilion regions about ch_L/R, metres."
+    )
+    radius_cphi_m: float = Field(
+        0.007, gt=0.0, le=0.1, description="Radius of the cphi regions about cphi_L/R, metres."
+    )
+    radius_alare_m: float = Field(
+        0.008, gt=0.0, le=0.1, description="Radius of the Alare regions about al_L/R, metres."
+    )
+
+    def radius(self, region: str) -> float:
+        """Radius in metres of a region of :data:`REGION_NAMES`."""
+        key = {"cphs_L": "cphs", "cphs_R": "cphs"}.get(region, region.lower())
+        return float(getattr(self, f"radius_{key}_m"))
+
+
+class TissueMaterial(BaseModel):
+    """Linear viscoelastic (Kelvin-Voigt) tissue constants of one region."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    E_kPa: float = Field(gt=0.0, le=1e5, description="Young's modulus, kPa.")
+    nu: float = Field(ge=0.0, lt=0.5, description="Poisson's ratio (dimensionless).")
+    eta_Pa_s: float = Field(ge=0.0, le=1e6, description="Viscosity, Pa*s.")
+    rho_kg_m3: float = Field(gt=0.0, le=1e4, description="Density, kg/m^3.")
+
+
+class MaterialModel(BaseModel):
+    """A materials file (``configs/materials/*.yaml``): default values plus regional ones."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(description="Short name of the model.")
+    description: str = Field("", description="Where the values come from.")
+    default: TissueMaterial = Field(description="Values of tissue outside the named regions.")
+    regions: dict[str, TissueMaterial] = Field(
+        default_factory=dict,
+        description=f"Per-region values; keys among {', '.join(REGION_NAMES)}.",
+    )
+
+    @model_validator(mode="after")
+    def _known_regions(self) -> MaterialModel:
+        unknown = sorted(set(self.regions) - set(REGION_NAMES))
+        if unknown:
+            raise ValueError(
+                f"materials file '{self.name}': unknown region(s) {unknown}; "
+                f"use names among {list(REGION_NAMES)}"
+            )
+        return self

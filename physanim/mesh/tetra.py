@@ -1,0 +1,234 @@
+"""Tetrahedralisation of the tissue volume (fTetWild via pytetwild), quality, node labels."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from physanim.mesh.binding import bind_points
+from physanim.mesh.params import TetraParams
+from physanim.mesh.tissue import PART_BONE, PART_SKIN, TissueSurface
+
+#: The 6 edges (i, j) of a tet and the two vertices (k, l) opposite each: the faces opposite k
+#: and l meet along edge (i, j).
+_EDGES = np.array(
+    [[0, 1, 2, 3], [0, 2, 1, 3], [0, 3, 1, 2], [1, 2, 0, 3], [1, 3, 0, 2], [2, 3, 0, 1]]
+)
+#: Vertices of the face opposite vertex i, ordered so the normal points out of a positive tet.
+_OPPOSITE = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+
+
+class TetMeshError(ValueError):
+    """The tetrahedral mesh is unusable (empty, degenerate tets)."""
+
+
+@dataclass(frozen=True)
+class TetMesh:
+    """Tetrahedral mesh: ``nodes`` (n, 3) metres, ``tets`` (m, 4) int64, all positive volume."""
+
+    nodes: np.ndarray
+    tets: np.ndarray
+
+
+@dataclass(frozen=True)
+class TetQuality:
+    """Quality summary of a tet mesh (angles in degrees, volume in m^3).
+
+    ``n_slivers`` counts tets whose smallest dihedral angle is below ``sliver_dihedral_deg``;
+    ``n_inverted_input`` counts tets that came out of the mesher negatively oriented and were
+    flipped (fTetWild's own orientation convention is negative, so usually all of them).
+    """
+
+    n_nodes: int
+    n_tets: int
+    volume_m3: float
+    min_dihedral_deg: float
+    median_dihedral_deg: float
+    max_dihedral_deg: float
+    max_aspect_ratio: float
+    median_aspect_ratio: float
+    n_slivers: int
+    n_inverted_input: int
+
+    def as_dict(self) -> dict[str, float | int]:
+        """Plain dict for logs and store attributes."""
+        return asdict(self)
+
+
+def tet_volumes(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Signed volumes (m,) of tets (m, 4) over nodes (n, 3); positive when (b-a, c-a, d-a) is
+    right-handed. Units: cube of the node unit."""
+    p = nodes[tets]
+    return (
+        np.einsum("mi,mi->m", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]))
+        / 6.0
+    )
+
+
+def dihedral_angles(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Interior dihedral angles (m, 6) in degrees of positively oriented tets (m, 4)."""
+    p = nodes[tets]  # (m, 4, 3)
+    f = p[:, _OPPOSITE]  # (m, 4, 3, 3)
+    n = np.cross(f[:, :, 1] - f[:, :, 0], f[:, :, 2] - f[:, :, 0])
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    cos = -np.einsum("mei,mei->me", n[:, _EDGES[:, 2]], n[:, _EDGES[:, 3]])
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def aspect_ratios(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Aspect ratio (m,) = longest edge / (2 sqrt(6) inradius); 1 for a regular tet."""
+    p = nodes[tets]
+    edges = np.linalg.norm(p[:, _EDGES[:, 0]] - p[:, _EDGES[:, 1]], axis=2)
+    f = p[:, _OPPOSITE]
+    areas = 0.5 * np.linalg.norm(
+        np.cross(f[:, :, 1] - f[:, :, 0], f[:, :, 2] - f[:, :, 0]), axis=2
+    ).sum(axis=1)
+    inradius = 3.0 * np.abs(tet_volumes(nodes, tets)) / areas
+    return edges.max(axis=1) / (2.0 * np.sqrt(6.0) * inradius)
+
+
+def orient_and_check(
+    nodes: np.ndarray, tets: np.ndarray, params: TetraParams
+) -> tuple[np.ndarray, int]:
+    """Return tets (m, 4) with positive volume (two nodes swapped where negative) and the count
+    that was flipped.
+
+    Raises:
+        TetMeshError: on an empty mesh or degenerate tets (|volume| below
+            ``degenerate_volume_rel * edge_length_m^3``).
+    """
+    tets = np.asarray(tets, dtype=np.int64).copy()
+    if tets.ndim != 2 or tets.shape[1] != 4 or len(tets) == 0:
+        raise TetMeshError(f"tets must be a non-empty (m, 4) array, got {tets.shape}")
+    vol = tet_volumes(nodes, tets)
+    tiny = params.degenerate_volume_rel * params.edge_length_m**3
+    bad = np.abs(vol) <= tiny
+    if np.any(bad):
+        raise TetMeshError(
+            f"{int(bad.sum())} degenerate tets (|volume| <= {tiny:.3g} m^3), e.g. tet "
+            f"{int(np.argmax(bad))}; re-run with optimize=True or a larger edge_length_m"
+        )
+    neg = vol < 0.0
+    tets[neg] = tets[neg][:, [1, 0, 2, 3]]
+    return tets, int(neg.sum())
+
+
+def quality_report(mesh: TetMesh, params: TetraParams, n_inverted_input: int = 0) -> TetQuality:
+    """Tet count, volume, dihedral angles, aspect ratios and slivers of a positive tet mesh."""
+    dih = dihedral_angles(mesh.nodes, mesh.tets)
+    ar = aspect_ratios(mesh.nodes, mesh.tets)
+    return TetQuality(
+        n_nodes=len(mesh.nodes),
+        n_tets=len(mesh.tets),
+        volume_m3=float(tet_volumes(mesh.nodes, mesh.tets).sum()),
+        min_dihedral_deg=float(dih.min()),
+        median_dihedral_deg=float(np.median(dih)),
+        max_dihedral_deg=float(dih.max()),
+        max_aspect_ratio=float(ar.max()),
+        median_aspect_ratio=float(np.median(ar)),
+        n_slivers=int(np.sum(dih.min(axis=1) < params.sliver_dihedral_deg)),
+        n_inverted_input=n_inverted_input,
+    )
+
+
+def tetrahedralize_surface(
+    vertices: np.ndarray, faces: np.ndarray, params: TetraParams
+) -> tuple[TetMesh, TetQuality]:
+    """Tetrahedralise a closed surface with fTetWild at ``params.edge_length_m``.
+
+    Args:
+        vertices: (N, 3) closed surface, metres; faces: (M, 3) int.
+        params: edge length, envelope, optimisation and quality thresholds.
+
+    Returns:
+        The positively oriented :class:`TetMesh` (no unused nodes) and its :class:`TetQuality`.
+    """
+    import pytetwild  # imports pyvista at load time
+
+    nodes, tets = pytetwild.tetrahedralize(
+        np.asarray(vertices, dtype=np.float64),
+        np.asarray(faces, dtype=np.int32),
+        edge_length_abs=params.edge_length_m,
+        epsilon=params.epsilon_rel,
+        optimize=params.optimize,
+        stop_energy=params.stop_energy,
+        num_opt_iter=params.max_opt_iterations,
+        quiet=True,
+    )
+    tets = np.asarray(tets, dtype=np.int64)
+    if len(tets) == 0:
+        raise TetMeshError(
+            "fTetWild returned no tets: the surface encloses no volume at this edge length; "
+            "check that it is closed or lower edge_length_m"
+        )
+    used, inverse = np.unique(tets, return_inverse=True)
+    nodes = np.asarray(nodes, dtype=np.float64)[used]
+    tets, flipped = orient_and_check(nodes, inverse.reshape(tets.shape), params)
+    mesh = TetMesh(nodes=nodes, tets=tets)
+    return mesh, quality_report(mesh, params, flipped)
+
+
+def boundary_faces(tets: np.ndarray) -> np.ndarray:
+    """(B, 3) faces of positive tets (m, 4) used by one tet only, oriented outward."""
+    faces = tets[:, _OPPOSITE].reshape(-1, 3)
+    _, inverse, counts = np.unique(
+        np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True
+    )
+    return faces[counts[inverse.ravel()] == 1]
+
+
+@dataclass(frozen=True)
+class NodeLabels:
+    """Node labels of a tissue tet mesh.
+
+    Attributes:
+        skin: (n,) bool, boundary nodes on the skin surface.
+        bone: (n,) bool, boundary nodes on the bone-side surface (fixed in the FEM).
+        landmark_node: (K,) int64, the skin node driven by each landmark.
+        landmark_distance: (K,) distance from each landmark to its node, metres.
+    """
+
+    skin: np.ndarray
+    bone: np.ndarray
+    landmark_node: np.ndarray
+    landmark_distance: np.ndarray
+
+
+def label_nodes(
+    mesh: TetMesh, surface: TissueSurface, landmarks: np.ndarray, params: TetraParams
+) -> NodeLabels:
+    """Label skin / bone-side boundary nodes and pick the skin node of each landmark.
+
+    Args:
+        mesh: the tissue tet mesh.
+        surface: the tissue surface it was built from (face parts tell skin from bone).
+        landmarks: (K, 3) tracked feature points on the skin, metres.
+        params: ``label_tolerance_rel`` (times ``edge_length_m``) decides on-surface.
+    """
+    tol = params.label_tolerance_rel * params.edge_length_m
+    on_boundary = np.zeros(len(mesh.nodes), dtype=bool)
+    on_boundary[boundary_faces(mesh.tets).ravel()] = True
+    idx = np.nonzero(on_boundary)[0]
+    pts = mesh.nodes[idx]
+
+    def near(part: int) -> np.ndarray:
+        d = bind_points(pts, surface.vertices, surface.faces[surface.part == part]).distance
+        out = np.zeros(len(mesh.nodes), dtype=bool)
+        out[idx[d <= tol]] = True
+        return out
+
+    skin = near(PART_SKIN)
+    bone = near(PART_BONE) & ~skin
+    skin_idx = np.nonzero(skin)[0]
+    if len(skin_idx) == 0:
+        raise TetMeshError("no tet node lies on the skin surface; check label_tolerance_rel")
+    lm = np.asarray(landmarks, dtype=np.float64).reshape(-1, 3)
+    dist, j = cKDTree(mesh.nodes[skin_idx]).query(lm)
+    return NodeLabels(
+        skin=skin,
+        bone=bone,
+        landmark_node=skin_idx[np.asarray(j, dtype=np.int64)],
+        landmark_distance=np.asarray(dist, dtype=np.float64),
+    )

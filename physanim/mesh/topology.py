@@ -1,0 +1,75 @@
+"""Combinatorial helpers for triangle meshes: edges, borders, watertightness, Laplacian."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def directed_edges(faces: np.ndarray) -> np.ndarray:
+    """(3F, 2) directed half-edges (a->b, b->c, c->a) of (F, 3) triangles."""
+    faces = np.asarray(faces, dtype=np.int64)
+    return np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2)
+
+
+def boundary_edges(faces: np.ndarray) -> np.ndarray:
+    """(B, 2) directed half-edges used by exactly one triangle (the open border), as oriented
+    in their triangle."""
+    he = directed_edges(faces)
+    key = np.sort(he, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return he[counts[inverse.ravel()] == 1]
+
+
+def boundary_vertex_mask(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(V,) bool: vertices on an open border of the triangle mesh."""
+    mask = np.zeros(n_vertices, dtype=bool)
+    mask[boundary_edges(faces).ravel()] = True
+    return mask
+
+
+def watertight_problems(faces: np.ndarray) -> list[str]:
+    """Reasons why (F, 3) triangles are not a closed, consistently oriented 2-manifold; [] if
+    they are: every undirected edge in exactly two triangles, traversed once each way."""
+    he = directed_edges(faces)
+    problems = []
+    key = np.sort(he, axis=1)
+    _, counts = np.unique(key, axis=0, return_counts=True)
+    if np.any(counts == 1):
+        problems.append(f"{int(np.sum(counts == 1))} open (border) edges")
+    if np.any(counts > 2):
+        problems.append(f"{int(np.sum(counts > 2))} non-manifold edges (in 3+ triangles)")
+    _, dcounts = np.unique(he, axis=0, return_counts=True)
+    if np.any(dcounts > 1):
+        problems.append(f"{int(np.sum(dcounts > 1))} inconsistently oriented edges")
+    return problems
+
+
+def uniform_laplacian(faces: np.ndarray, n_vertices: int) -> sp.csr_array:
+    """Graph Laplacian L = D - A of a triangle mesh, (V, V) sparse (row sums zero)."""
+    he = directed_edges(faces)
+    i = np.r_[he[:, 0], he[:, 1]]
+    j = np.r_[he[:, 1], he[:, 0]]
+    adj = sp.csr_array((np.ones(len(i)), (i, j)), shape=(n_vertices, n_vertices))
+    adj.data[:] = 1.0  # duplicate entries were summed: reset to a 0/1 adjacency
+    deg = np.asarray(adj.sum(axis=1)).ravel()
+    return (sp.diags_array(deg) - adj).tocsr()
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) unit area-weighted vertex normals of a triangle mesh (zero for isolated vertices)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # 2 * area * normal
+    n = np.zeros_like(v)
+    for c in range(3):
+        np.add.at(n, f[:, c], fn)
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(norm > 0.0, norm, 1.0)
+
+
+def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) triangle areas in the square of the vertex unit."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)

@@ -1,0 +1,137 @@
+"""Evaluation plots of the face pipeline (matplotlib, Agg canvas), each saved as PNG and SVG.
+
+Inputs are SI (seconds, metres, joules); the axes show mm where the seed does.  Every
+function takes ``stem`` (path without suffix) and returns ``(png_path, svg_path)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure as MplFigure
+
+
+def _save(fig: MplFigure, stem: str | Path) -> tuple[Path, Path]:
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    png, svg = stem.with_suffix(".png"), stem.with_suffix(".svg")
+    fig.savefig(png, dpi=120)
+    fig.savefig(svg)
+    return png, svg
+
+
+def _check_series(time: np.ndarray, series: Mapping[str, np.ndarray], what: str) -> np.ndarray:
+    time = np.asarray(time, dtype=np.float64)
+    if time.ndim != 1:
+        raise ValueError(f"time must be (T,) seconds, got shape {time.shape}")
+    if not series:
+        raise ValueError(f"{what}: nothing to plot (empty mapping)")
+    for name, y in series.items():
+        if len(np.asarray(y)) != len(time):
+            raise ValueError(f"{what}[{name!r}] has {len(y)} samples, time has {len(time)}")
+    return time
+
+
+def plot_symmetry_cost(
+    time: np.ndarray, costs: Mapping[str, np.ndarray], stem: str | Path
+) -> tuple[Path, Path]:
+    """Symmetry cost L(t) = ln|E_L - E_R| (SPEC eq 4.38, already a log) per variant;
+    ``time`` (T,) s, ``costs`` name -> (T,) dimensionless."""
+    time = _check_series(time, costs, "costs")
+    fig = MplFigure(figsize=(7, 3.6))
+    ax = fig.subplots()
+    for k, (name, cost) in enumerate(costs.items()):
+        ax.plot(time, cost, lw=1.5, color=f"C{k}", label=name)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(r"symmetry cost $\ln|E_L - E_R|$ (log scale)")
+    ax.set_title("Symmetry cost (lower = more symmetric)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, stem)
+
+
+def plot_mouth_corners(
+    time: np.ndarray,
+    corners: Mapping[str, np.ndarray],
+    stem: str | Path,
+    *,
+    sides: Sequence[str] = ("left (ch_L)", "right (ch_R)"),
+) -> tuple[Path, Path]:
+    """Mouth-corner displacement |p(t) - p(0)| per variant (seed figure 6.9): ``corners``
+    name -> (T, 2) m (columns: the actor's left and right cheilion); axes in mm vs s."""
+    time = _check_series(time, corners, "corners")
+    fig = MplFigure(figsize=(10, 3.6))
+    axes = fig.subplots(1, len(sides), sharey=True, squeeze=False)[0]
+    for k, (name, d) in enumerate(corners.items()):
+        d = np.asarray(d, dtype=np.float64)
+        if d.shape != (len(time), len(sides)):
+            raise ValueError(
+                f"corners[{name!r}] must be ({len(time)}, {len(sides)}) m, got {d.shape}"
+            )
+        for j, ax in enumerate(axes):
+            ax.plot(time, 1e3 * d[:, j], lw=1.5, color=f"C{k}", label=name)
+    for ax, side in zip(axes, sides, strict=True):
+        ax.set_title(f"mouth corner, {side}")
+        ax.set_xlabel("time (s)")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("displacement (mm)")
+    axes[0].legend(fontsize=8)
+    return _save(fig, stem)
+
+
+def plot_energies(
+    time: np.ndarray, energies: Mapping[str, Mapping[str, np.ndarray]], stem: str | Path
+) -> tuple[Path, Path]:
+    """One panel per energy (e.g. kinetic, strain, dissipated), one line per variant:
+    ``energies`` variant -> quantity -> (T,) J; ``time`` (T,) s."""
+    if not energies:
+        raise ValueError("energies: nothing to plot (empty mapping)")
+    quantities = list(dict.fromkeys(q for v in energies.values() for q in v))
+    fig = MplFigure(figsize=(4 * len(quantities), 3.4))
+    axes = fig.subplots(1, len(quantities), squeeze=False)[0]
+    for k, (variant, series) in enumerate(energies.items()):
+        time = _check_series(time, series, f"energies[{variant!r}]")
+        for ax, q in zip(axes, quantities, strict=True):
+            if q in series:
+                ax.plot(time, series[q], lw=1.5, color=f"C{k}", label=variant)
+    for ax, q in zip(axes, quantities, strict=True):
+        ax.set_title(f"{q} energy")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("energy (J)")
+        ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 3))
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    return _save(fig, stem)
+
+
+def plot_landmark_curves(
+    time: np.ndarray,
+    displacement: np.ndarray,
+    names: Sequence[str],
+    stem: str | Path,
+    *,
+    title: str = "Landmark displacement",
+) -> tuple[Path, Path]:
+    """|p_k(t) - p_k(0)| of every landmark: ``displacement`` (T, K) m, ``names`` (K,);
+    bilateral pairs share a colour (left solid, right dashed); axes in mm vs s."""
+    time = np.asarray(time, dtype=np.float64)
+    d = np.asarray(displacement, dtype=np.float64)
+    if d.shape != (len(time), len(names)):
+        raise ValueError(f"displacement must be ({len(time)}, {len(names)}) m, got {d.shape}")
+    bases = list(dict.fromkeys(n.removesuffix("_L").removesuffix("_R") for n in names))
+    fig = MplFigure(figsize=(8, 4.2))
+    ax = fig.subplots()
+    for k, name in enumerate(names):
+        base = name.removesuffix("_L").removesuffix("_R")
+        colour = f"C{bases.index(base) % 10}"
+        style = "--" if name.endswith("_R") else "-"
+        ax.plot(time, 1e3 * d[:, k], style, lw=1.3, color=colour, label=name)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("displacement (mm)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    return _save(fig, stem)

@@ -1,0 +1,84 @@
+"""Side-by-side panels, landmark overlays and MP4 round trips."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from physanim.render.panel import TITLE_HEIGHT, draw_landmarks, panel, write_mp4
+
+
+def test_panel_size_and_titles():
+    a = np.full((100, 80, 3), 30, np.uint8)
+    b = np.full((50, 60, 3), 200, np.uint8)
+    out = panel([a, b], ["capture", "FEM result"])
+    # b is scaled to 100 rows -> 120 columns; title strip on top.
+    assert out.shape == (TITLE_HEIGHT + 100, 80 + 120, 3)
+    assert (out[TITLE_HEIGHT:, :80] == 30).all()
+    assert np.abs(out[TITLE_HEIGHT + 2 : -2, 82:-2].astype(int) - 200).max() <= 1
+    strip = out[:TITLE_HEIGHT]
+    assert (strip[:, :80].sum(axis=2) < 300).sum() > 20  # dark title text in each tile
+    assert (strip[:, 80:].sum(axis=2) < 300).sum() > 20
+
+
+def test_panel_pads_to_even_size():
+    out = panel([np.zeros((31, 33, 3), np.uint8)], ["x"])
+    assert out.shape[0] % 2 == 0 and out.shape[1] % 2 == 0
+
+
+def test_panel_rejects_mismatch():
+    with pytest.raises(ValueError, match="one title per frame"):
+        panel([np.zeros((4, 4, 3), np.uint8)], ["a", "b"])
+
+
+def test_draw_landmarks_colours_by_confidence():
+    img = np.zeros((60, 120, 3), np.uint8)
+    uv = np.array([[20.0, 30.0], [60.0, 30.0], [np.nan, 5.0], [100.0, 30.0]])
+    out = draw_landmarks(img, uv, np.array([1.0, 0.15, 1.0, 0.05]), min_confidence=0.1)
+    assert (img == 0).all()  # input untouched
+    ring_good = out[30, 20 + 4]  # on the ring of radius 4
+    ring_bad = out[30, 60 + 4]
+    assert ring_good[1] > 150 and ring_good[0] < 60  # green
+    assert ring_bad[0] > 150 and ring_bad[1] < 60  # red
+    assert (out[:, 90:] == 0).all()  # below min_confidence: skipped
+    assert (out[:12] == 0).all()  # NaN: skipped
+
+
+def test_write_mp4_round_trip(tmp_path):
+    frames = [np.full((48, 64, 3), (10 * i, 100, 200 - 10 * i), np.uint8) for i in range(12)]
+    path, codec = write_mp4(iter(frames), tmp_path / "v.mp4", fps=30.0)
+    assert codec == "vp09"  # browser-playable codec available in OpenCV's FFmpeg here
+    cap = cv2.VideoCapture(str(path))
+    decoded = []
+    while True:
+        ok, bgr = cap.read()
+        if not ok:
+            break
+        decoded.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+    assert len(decoded) == 12
+    assert cap.get(cv2.CAP_PROP_FPS) == pytest.approx(30.0)
+    assert decoded[0].shape == (48, 64, 3)
+    for src, got in zip(frames, decoded, strict=True):
+        assert np.abs(got.astype(int) - src).mean() < 8
+
+
+def test_write_mp4_errors(tmp_path):
+    with pytest.raises(ValueError, match="suffix must be"):
+        write_mp4([np.zeros((8, 8, 3), np.uint8)], tmp_path / "v.avi", 30.0)
+    with pytest.raises(ValueError, match="no frames"):
+        write_mp4([], tmp_path / "v.mp4", 30.0)
+    frames = [np.zeros((8, 8, 3), np.uint8), np.zeros((8, 10, 3), np.uint8)]
+    with pytest.raises(ValueError, match="frame 1 has shape"):
+        write_mp4(frames, tmp_path / "v.mp4", 30.0)
+
+
+def test_write_webm_vp8(tmp_path):
+    frames = [np.full((32, 48, 3), 17 * i, np.uint8) for i in range(5)]
+    path, codec = write_mp4(frames, tmp_path / "v.webm", fps=25.0)
+    assert codec == "VP80"
+    cap = cv2.VideoCapture(str(path))
+    n = 0
+    while cap.read()[0]:
+        n += 1
+    assert n == 5

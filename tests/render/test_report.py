@@ -1,0 +1,58 @@
+"""The HTML report: relative links to existing files, stage names, no external assets."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from physanim.render.panel import write_mp4
+from physanim.render.plots import plot_symmetry_cost
+from physanim.render.report import ReportError, build_report
+
+STAGES = ["ingest", "track", "fit", "align", "tetra", "materials", "simulate", "evaluate", "render"]
+
+
+def test_report_links_and_content(tmp_path):
+    out = tmp_path / "report"
+    media = tmp_path / "media"
+    video, _ = write_mp4([np.zeros((16, 16, 3), np.uint8)] * 3, media / "v.mp4", 30.0)
+    png, _ = plot_symmetry_cost(np.arange(5.0), {"m1": np.zeros(5)}, media / "sym")
+    stage_table = [
+        dict(
+            stage=s,
+            key=f"k{i}",
+            action="ran",
+            seconds=0.5 * i,
+            params={"dt": 1e-3},
+            provenance={"code": "0.1.0"},
+        )
+        for i, s in enumerate(STAGES)
+    ]
+    path = build_report(
+        out,
+        title="Face <run>",
+        video=video,
+        images=[("symmetry cost", png)],
+        key_figures={"peak ch_L (mm)": 3.14159, "frames": 3},
+        stage_table=stage_table,
+        variants={"model 1": {"cost": -4.0}, "model 2": {"cost": -3.5}},
+    )
+    assert path == out / "index.html"
+    text = path.read_text()
+    links = re.findall(r"(?:src|href)='([^']+)'", text)
+    assert links, "no links found"
+    for link in links:
+        assert not link.startswith(("/", "http:", "https:", "file:"))
+        assert (out / link).resolve().is_file(), link
+    for s in STAGES:
+        assert f"<details><summary>{s} " in text
+    assert "Face &lt;run&gt;" in text  # escaped
+    assert "3.142" in text and "model 2" in text and "Total: <b>18.00 s</b>" in text
+    assert "<script" not in text and "<link" not in text
+
+
+def test_report_missing_file(tmp_path):
+    with pytest.raises(ReportError, match="does not exist"):
+        build_report(tmp_path, title="t", images=[("x", tmp_path / "nope.png")])
