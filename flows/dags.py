@@ -11,8 +11,11 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
+from pydantic import BaseModel
+
 from physanim.capture.params import DemoParams
-from physanim.pipeline import Pipeline
+from physanim.pipeline import Pipeline, PlanEntry
+from physanim.store import StageStore
 from tasks import (
     align,
     arm_render,
@@ -23,12 +26,22 @@ from tasks import (
     keyframes,
     materials,
     muscles,
+    render,
     simulate,
     tetra,
     track,
 )
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+
+
+def face_report(store: StageStore, entries: list[PlanEntry], config: BaseModel) -> Path | None:
+    """The face run's HTML report in ``<run dir>/report/`` (variants side by side)."""
+    from physanim.render.run_report import write_run_report
+
+    dataset = config.dataset  # type: ignore[attr-defined]
+    return write_run_report(store, entries, dataset.run_dir / "report", f"physanim: {dataset.name}")
+
 
 FACE = Pipeline(
     name="face",
@@ -41,10 +54,12 @@ FACE = Pipeline(
         materials.SPEC,
         simulate.SPEC,
         evaluate.SPEC,
+        render.SPEC,
     ),
     default_config=CONFIGS / "default.yaml",
     extra_sections={"demo": DemoParams},
     prepare=ingest.ensure_demo,
+    report=face_report,
 )
 
 ARM = Pipeline(

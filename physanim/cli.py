@@ -156,6 +156,10 @@ def run(
             named = pipeline_flow.with_options(name=f"physanim-{dag.name}")
             for r in named(dag, cfg, entries, progress):
                 _log_result(r)
+    if dag.report is not None and (todo or not (cfg.dataset.run_dir / "report").exists()):
+        report = dag.report(store, entries, cfg)
+        if report is not None:
+            console.print(f"report: {report}")
     console.print(
         f"{pipeline}: {len(todo)} stage(s) ran, {len(entries) - len(todo)} cached/skipped, "
         f"{time.perf_counter() - t0:.1f} s; store {store.root}"

@@ -38,7 +38,10 @@ def compute(ctx: StageContext) -> None:
     fem = nodes[lm_nodes] + disp[:, lm_nodes]
     kin_motion = aligned["motion"][...].astype(np.float64)[:, aligned["landmark_vertices"][...]]
     track_names = list(tracked.attrs["names"])
-    tracked_pts = tracked["points"][...][:, [track_names.index(n) for n in names]]
+    # tracked points are in the camera frame: remove the head pose (camera <- actor) per frame
+    cam = tracked["points"][...][:, [track_names.index(n) for n in names]]
+    pose = tracked["head_pose"][...]
+    tracked_pts = np.einsum("tji,tkj->tki", pose[:, :3, :3], cam - pose[:, None, :3, 3])
     variants = {"fem": fem, "kinematic": kin_motion, "tracked": tracked_pts}
     summary: dict[str, object] = {}
     for label, pts in variants.items():
@@ -68,11 +71,8 @@ def compute(ctx: StageContext) -> None:
         rng = np.random.default_rng(0)
         skin_idx = np.nonzero(skin)[0]
         skin_idx = rng.choice(skin_idx, min(len(skin_idx), params.error_max_points), False)
-        scan_idx = rng.choice(
-            len(aligned["scan_vertices"]),
-            min(len(aligned["scan_vertices"]), params.error_max_points),
-            False,
-        )
+        n_scan = aligned["scan_vertices"].shape[0]
+        scan_idx = rng.choice(n_scan, min(n_scan, params.error_max_points), False)
         fem_skin = nodes[skin_idx][None] + disp[:, skin_idx]
         kin_skin = (
             aligned["kinematic"]
@@ -95,7 +95,7 @@ SPEC = StageSpec(
     name="evaluate",
     upstream=("track", "align", "tetra", "simulate"),
     params=EvaluateParams,
-    version="1",
+    version="2",
     compute=compute,
     doc="symmetry cost, mouth-corner curves, driven/free lag, errors against truth",
 )

@@ -47,11 +47,13 @@ def displacement_curves(points: NDArray[np.floating]) -> NDArray:
 def lag_frames(driver: NDArray[np.floating], follower: NDArray[np.floating], max_lag: int) -> int:
     """Lag (frames, >= 0 when ``follower`` trails ``driver``) maximising their correlation.
 
-    driver, follower: (T,) curves, e.g. mean displacement of driven and of free skin nodes.
+    driver, follower: (T,) curves, e.g. mean displacement of driven and of free skin nodes;
+    lags beyond T - 1 frames are not searched.
     """
     a = driver - driver.mean()
     b = follower - follower.mean()
     n = len(a)
+    max_lag = min(max_lag, n - 1)
     lags = np.arange(-max_lag, max_lag + 1)
     scores = [
         float(np.dot(a[max(0, -k) : n - max(0, k)], b[max(0, k) : n - max(0, -k)])) for k in lags

@@ -77,6 +77,8 @@ class Pipeline:
     extra_sections: Mapping[str, type[BaseModel]] = field(default_factory=dict)
     #: called by ``run`` before planning, e.g. to generate a missing demo dataset
     prepare: Callable[[BaseModel, Any], Any] | None = None
+    #: called by ``run`` after the stages, (store, plan entries, config) -> report path | None
+    report: Callable[[Any, Any, BaseModel], Path | None] | None = None
 
     def __post_init__(self) -> None:
         seen: set[str] = set()

@@ -172,7 +172,7 @@ def colour_bar(colour_map: ColourMap, width: int, height: int = BAR_HEIGHT) -> n
         fig.legend(
             handles=handles,
             loc="center",
-            ncol=min(len(handles), max(1, width // 90)),
+            ncol=-(-len(handles) // -(-len(handles) // max(1, width // 90))),  # balanced rows
             fontsize=8,
             frameon=False,
             title=colour_map.label,

@@ -42,3 +42,5 @@ def test_displacement_and_lag() -> None:
     d = displacement_curves(pts)
     assert d.shape == (101, 2) and d[25, 0] == pytest.approx(0.01)
     assert lag_frames(pts[:, 0, 1], pts[:, 1, 1], 10) == 4
+    pulse = lambda centre: np.exp(-(((np.arange(30) - centre) / 3.0) ** 2))  # noqa: E731
+    assert lag_frames(pulse(12), pulse(16), 50) == 4  # search range clamped to T - 1

@@ -1,0 +1,126 @@
+"""Stage ``render``: side-by-side video of capture | model fit | kinematic scan | FEM, plots.
+
+Per frame: the captured colour frame with the tracked landmarks, the CANDIDE-style fit, the
+kinematic (bound) scan and the FEM skin coloured by displacement, in one panel; PNG frames,
+an MP4 at the capture frame rate and matplotlib plots, all in this output's files/.
+"""
+
+from __future__ import annotations
+
+import time
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from physanim.pipeline import StageContext, StageSpec
+
+
+class RenderParams(BaseModel):
+    """Rendering settings."""
+
+    model_config = ConfigDict(extra="forbid")
+    tile_width_px: int = Field(480, ge=64, le=4096, description="width of each panel tile, px")
+    tile_height_px: int = Field(640, ge=64, le=4096, description="height of each tile, px")
+    every_frames: int = Field(1, ge=1, le=1000, description="render every n-th frame")
+    png_frames: bool = Field(True, description="also keep each panel as a PNG")
+    displacement_max_mm: float = Field(
+        0.0, ge=0.0, le=100.0, description="colour-bar top, mm (0: the run's maximum)"
+    )
+
+
+def compute(ctx: StageContext) -> None:
+    """panel frames + video + plots of the upstream chain."""
+    import numpy as np
+
+    from physanim.mesh.tetra import boundary_faces
+    from physanim.render.face import ColourMap, frontal_camera, render_sequence
+    from physanim.render.panel import draw_landmarks, panel, write_mp4
+    from physanim.render.plots import plot_energies, plot_mouth_corners, plot_symmetry_cost
+
+    params: RenderParams = ctx.params  # type: ignore[assignment]
+    cap, tracked, aligned = ctx.input("ingest"), ctx.input("track"), ctx.input("align")
+    mesh, sim, ev = ctx.input("tetra"), ctx.input("simulate"), ctx.input("evaluate")
+    frames = np.arange(0, sim["displacements"].shape[0], params.every_frames)
+    size = (params.tile_width_px, params.tile_height_px)
+
+    scan_v, scan_f = aligned["scan_vertices"][...], aligned["scan_faces"][...]
+    camera = frontal_camera(scan_v, size, bar=True)
+    nodes, tets, skin = mesh["nodes"][...], mesh["tets"][...], mesh["skin"][...]
+    outer = boundary_faces(tets)
+    skin_faces = outer[skin[outer].all(axis=1)]
+    disp = sim["displacements"].get_orthogonal_selection((frames, slice(None), slice(None)))
+    magnitude_mm = np.linalg.norm(disp, axis=-1) * 1e3
+    top = params.displacement_max_mm or max(float(magnitude_mm.max()), 1e-3)
+    bar = ColourMap("displacement (mm)", clim=(0.0, top))
+
+    t0 = time.perf_counter()
+    tiles = {
+        "CANDIDE-style fit": render_sequence(
+            aligned["motion"][...][frames], aligned["triangles"][...], camera=camera, size=size,
+            progress=ctx.progress("render fit"),
+        ),
+        "kinematic scan": render_sequence(
+            aligned["kinematic"].get_orthogonal_selection((frames, slice(None), slice(None))),
+            scan_f, camera=camera, size=size, progress=ctx.progress("render kinematic"),
+        ),
+        "FEM": render_sequence(
+            nodes[None] + disp, skin_faces, scalars=magnitude_mm, colour_map=bar,
+            camera=camera, size=size, progress=ctx.progress("render FEM"),
+        ),
+    }  # fmt: skip
+    render_s = time.perf_counter() - t0
+    colour = cap["color"].get_orthogonal_selection((frames,))
+    uv, conf = tracked["uv"][...][frames], tracked["confidence"][...][frames]
+
+    out = ctx.files_dir
+    (out / "frames").mkdir(exist_ok=True)
+    panels = []
+    seen = uv[np.isfinite(uv).all(axis=-1)]
+    if len(seen):  # crop the capture to the face (landmarks' box + 60 %), aspect of a tile
+        (u0, v0), (u1, v1) = seen.min(axis=0), seen.max(axis=0)
+        half_h = 0.8 * max(v1 - v0, (u1 - u0) * size[1] / size[0])
+        half_w = half_h * size[0] / size[1]
+        cu, cv = (u0 + u1) / 2, (v0 + v1) / 2
+        h, w = colour.shape[1:3]
+        box = (max(int(cv - half_h), 0), min(int(cv + half_h), h),
+               max(int(cu - half_w), 0), min(int(cu + half_w), w))  # fmt: skip
+    else:
+        box = (0, colour.shape[1], 0, colour.shape[2])
+    offset = np.array([box[2], box[0]])
+    for i, t in enumerate(frames):
+        crop = np.ascontiguousarray(colour[i, box[0] : box[1], box[2] : box[3]])
+        captured = draw_landmarks(crop, uv[i] - offset, conf[i], radius=2)
+        images = [captured, *(v[i] for v in tiles.values())]
+        frame = panel(images, [f"capture t={t / float(aligned.attrs['fps']):.2f} s", *tiles])
+        panels.append(frame)
+        if params.png_frames:
+            import cv2
+
+            cv2.imwrite(str(out / "frames" / f"{t:04d}.png"), frame[..., ::-1])
+    fps = float(aligned.attrs["fps"]) / params.every_frames
+    video, codec = write_mp4(panels, out / "panel.mp4", fps)
+
+    time_s = np.asarray(sim["times"][...])
+    names = list(ev.attrs["landmark_names"])
+    ch = [names.index("ch_L"), names.index("ch_R")]
+    variants = ("tracked", "kinematic", "fem")
+    plot_symmetry_cost(time_s, {v: ev[f"{v}/cost"][...] for v in variants}, out / "symmetry")
+    mouth = {v: ev[f"{v}/displacement"][...][:, ch] for v in variants}
+    plot_mouth_corners(time_s, mouth, out / "mouth_corners")
+    energies = {q: sim[q][...] for q in ("kinetic", "strain", "dissipated")}
+    plot_energies(time_s, {"fem": energies}, out / "energies")
+    ctx.summary.update(
+        frames=len(frames),
+        video=video.name,
+        codec=codec,
+        render_s_per_frame=round(render_s / max(len(frames), 1), 4),
+    )
+
+
+SPEC = StageSpec(
+    name="render",
+    upstream=("ingest", "track", "align", "tetra", "simulate", "evaluate"),
+    params=RenderParams,
+    version="2",
+    compute=compute,
+    doc="panel video (capture | fit | kinematic | FEM), symmetry / mouth / energy plots",
+)

@@ -1,0 +1,134 @@
+"""The whole face DAG on a short demo, at coarse resolution: outputs, caching, physics.
+
+One module-scoped run (about 10 frames, coarse scan and tets) feeds every test here.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from flows.dags import FACE
+from physanim.config import load_config
+from physanim.pipeline import execute_plan_locally, make_plan
+from physanim.store import StageStore
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+COARSE = [
+    "demo.n_frames=12",
+    "align.remesh_edge_length_m=0.0015",
+    "tetra.surface_edge_length_m=0.005",
+    "tetra.edge_length_m=0.007",
+    "tetra.max_opt_iterations=5",
+    "simulate.dt=0.002",
+    "evaluate.error_every_frames=3",
+    "evaluate.error_max_points=800",
+    "render.tile_width_px=120",
+    "render.tile_height_px=160",
+    "render.every_frames=2",
+]
+
+
+def configure(data: Path, *files: Path, extra: tuple[str, ...] = ()):
+    sets = [f"dataset.dir={data}", *COARSE, *extra]
+    cfg, _ = load_config(FACE.config_model(), [FACE.default_config, *files], sets)
+    return cfg, StageStore(cfg.dataset.store_path)
+
+
+def run(cfg, store) -> list[str]:
+    plan = make_plan(FACE, cfg, store)
+    results = execute_plan_locally(FACE, cfg, plan)
+    return [r.stage for r in results if r.action == "ran"]
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory: pytest.TempPathFactory):
+    data = tmp_path_factory.mktemp("face") / "demo"
+    cfg, store = configure(data)
+    from tasks.ingest import ensure_demo
+
+    ensure_demo(cfg)
+    ran = run(cfg, store)
+    return data, cfg, store, ran
+
+
+def test_every_stage_runs_and_writes_its_outputs(demo_run) -> None:
+    _, cfg, store, ran = demo_run
+    assert ran == [s.name for s in FACE.stages]
+    sim = store.open("simulate")
+    n_frames = 12
+    assert sim["displacements"].shape[0] == n_frames and sim["displacements"].dtype == np.float32
+    d = sim["displacements"]
+    assert d.chunks[1:] == d.shape[1:]  # chunked along frames only
+    quality = store.provenance("tetra")["quality"]
+    assert quality["min_dihedral_deg"] > 0 and quality["n_tets"] > 1000
+    files = store.root / "render" / store.latest("render") / "files"
+    video = cv2.VideoCapture(str(files / "panel.mp4"))
+    assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 6  # every 2nd of 12 frames
+    ok, frame = video.read()
+    assert ok and frame.std() > 10 and frame.shape[1] > 4 * 120
+
+
+def test_driven_nodes_follow_the_landmarks_and_the_skin_lags_between(demo_run) -> None:
+    _, cfg, store, _ = demo_run
+    aligned, mesh, sim = store.open("align"), store.open("tetra"), store.open("simulate")
+    names = list(aligned.attrs["landmark_names"])
+    driven = sim["driven_nodes"][...]
+    disp = sim["displacements"][...]
+    motion = aligned["motion"][...]
+    landmark_node = mesh["landmark_node"][...]
+    vertices = aligned["landmark_vertices"][...]
+    for name in cfg.simulate.drive:
+        i = names.index(name)
+        node = landmark_node[i]
+        assert node in driven
+        expected = motion[:, vertices[i]] - motion[0, vertices[i]]
+        np.testing.assert_allclose(disp[:, node], expected, atol=1e-6)  # m, float32 output
+    # free skin moves (driven by elasticity) but less than the most-moving driven node
+    skin = np.nonzero(mesh["skin"][...])[0]
+    free = np.setdiff1d(skin, driven)
+    peak_free = np.linalg.norm(disp[:, free], axis=-1).max()
+    peak_driven = np.linalg.norm(disp[:, driven], axis=-1).max()
+    assert 0 < peak_free <= 1.5 * peak_driven
+
+
+def test_material_edit_reruns_materials_onward_only(demo_run) -> None:
+    data, _, _, _ = demo_run
+    cfg, store = configure(data, CONFIGS / "models" / "model2.yaml")
+    plan = make_plan(FACE, cfg, store)
+    assert [e.stage for e in plan if e.action == "run"] == [
+        "materials", "simulate", "evaluate", "render",
+    ]  # fmt: skip
+
+
+def test_regional_models_change_symmetry_as_physics_predicts(demo_run) -> None:
+    """A stiffer right philtrum (model 2) moves less on the right than model 1; softer (3) more.
+
+    Measured on the free skin nodes of the cphs_R region against those of cphs_L, and on the
+    seed's symmetry measure: the right side's relative landmark stretch E_R (eq 4.39).
+    """
+    data, _, _, _ = demo_run
+    peak, stretch = {}, {}
+    for model in ("model1", "model2", "model3"):
+        cfg, store = configure(
+            data, CONFIGS / "models" / f"{model}.yaml", extra=("render.every_frames=6",)
+        )
+        run(cfg, store)
+        mats, sim = store.open("materials"), store.open("simulate")
+        names = list(mats.attrs["region_names"])
+        tets = store.open("tetra")["tets"][...]
+        labels = mats["tet_labels"][...]
+        disp = np.linalg.norm(sim["displacements"][...], axis=-1)
+        driven = sim["driven_nodes"][...]
+        per_side = []
+        for side in ("cphs_R", "cphs_L"):
+            nodes = np.setdiff1d(np.unique(tets[labels == names.index(side)]), driven)
+            per_side.append(disp[:, nodes].mean(axis=1).max())
+        peak[model] = per_side[0] / per_side[1]  # right / left
+        stretch[model] = float(np.abs(store.open("evaluate")["fem/e_right"][...]).max())
+    print("right/left philtrum motion", peak, "max |E_R|", stretch)
+    assert peak["model2"] < peak["model1"] < peak["model3"]
+    assert stretch["model2"] < stretch["model1"] < stretch["model3"]
