@@ -133,3 +133,24 @@ def test_regional_models_change_symmetry_as_physics_predicts(demo_run) -> None:
     print("right/left philtrum motion", peak, "max |E_R|", stretch)
     assert peak["model2"] < peak["model1"] < peak["model3"]
     assert (stretch["model2"] - stretch["model1"]) * (stretch["model3"] - stretch["model1"]) < 0
+
+
+def test_model_sweep_shares_upstream_stages(demo_run, tmp_path: Path) -> None:
+    """configs/sweeps/models.yaml: ingest..tetra once, materials onward once per model."""
+    from flows.sweep import plan_sweep
+
+    data, _, _, _ = demo_run
+    sweep = tmp_path / "models.yaml"
+    text = (CONFIGS / "sweeps" / "models.yaml").read_text()
+    sweep.write_text(
+        text.replace("datasets: [demo]", f"datasets: [{data}]")
+        .replace("configs/models/", f"{CONFIGS}/models/")
+        .replace("variants:", f"set: {{dataset.store: {tmp_path / 'fresh.zarr'}}}\nvariants:")
+    )
+    _, variants, _, jobs = plan_sweep(sweep)
+    assert [v.name for v in variants] == ["model1", "model2", "model3"]
+    counts = {s.name: sum(j.entry.stage == s.name for j in jobs) for s in FACE.stages}
+    assert counts == {
+        "ingest": 1, "track": 1, "fit": 1, "align": 1, "tetra": 1,
+        "materials": 3, "simulate": 3, "evaluate": 3, "render": 3,
+    }  # fmt: skip
