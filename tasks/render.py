@@ -25,6 +25,7 @@ class RenderParams(BaseModel):
     displacement_max_mm: float = Field(
         0.0, ge=0.0, le=100.0, description="colour-bar top, mm (0: the run's maximum)"
     )
+    turntable: bool = Field(False, description="turn the 3D tiles once around over the video")
 
 
 def compute(ctx: StageContext) -> None:
@@ -52,19 +53,21 @@ def compute(ctx: StageContext) -> None:
     top = params.displacement_max_mm or max(float(magnitude_mm.max()), 1e-3)
     bar = ColourMap("displacement (mm)", clim=(0.0, top))
 
+    azimuth = np.linspace(0.0, 360.0, len(frames), endpoint=False) if params.turntable else None
     t0 = time.perf_counter()
     tiles = {
         "CANDIDE-style fit": render_sequence(
             aligned["motion"][...][frames], aligned["triangles"][...], camera=camera, size=size,
-            progress=ctx.progress("render fit"),
+            azimuth_deg=azimuth, progress=ctx.progress("render fit"),
         ),
         "kinematic scan": render_sequence(
             aligned["kinematic"].get_orthogonal_selection((frames, slice(None), slice(None))),
-            scan_f, camera=camera, size=size, progress=ctx.progress("render kinematic"),
+            scan_f, camera=camera, size=size, azimuth_deg=azimuth,
+            progress=ctx.progress("render kinematic"),
         ),
         "FEM": render_sequence(
             nodes[None] + disp, skin_faces, scalars=magnitude_mm, colour_map=bar,
-            camera=camera, size=size, progress=ctx.progress("render FEM"),
+            camera=camera, size=size, azimuth_deg=azimuth, progress=ctx.progress("render FEM"),
         ),
     }  # fmt: skip
     render_s = time.perf_counter() - t0
