@@ -3,7 +3,8 @@
 Three steps, all on arrays in metres in the project's actor frame (+x actor's left, +y up,
 +z out of the face, see :mod:`physanim.face.landmarks`):
 
-1. :func:`umeyama` -- least-squares similarity (or rigid) transform from landmark pairs.
+1. ``tracking.similarity.fit_transform`` -- least-squares similarity (or rigid) transform
+   from landmark pairs (Umeyama 1991).
 2. :func:`per_axis_scale` -- the seed's per-axis scaling (SPEC eqs 5.1-5.4): the width ratio
    ``w_s / w_a`` for x and z, and separate height ratios above (``h_s,u / h_a,u``) and below
    (``h_s,d / h_a,d``) the nose tip for y, about the scan's nose tip.
@@ -23,50 +24,7 @@ import scipy.sparse.linalg as spla
 from physanim.mesh.binding import REGION_FACE, bind_points
 from physanim.mesh.params import AlignParams
 from physanim.mesh.topology import boundary_vertex_mask, uniform_laplacian
-
-
-@dataclass(frozen=True)
-class Similarity:
-    """x' = scale * R @ x + t.  ``rotation`` (3, 3), ``translation`` (3,) metres."""
-
-    scale: float
-    rotation: np.ndarray
-    translation: np.ndarray
-
-    def apply(self, x: np.ndarray) -> np.ndarray:
-        """Transform points (..., 3) in metres."""
-        return self.scale * np.asarray(x) @ self.rotation.T + self.translation
-
-
-def umeyama(source: np.ndarray, target: np.ndarray, with_scale: bool = True) -> Similarity:
-    """Least-squares similarity transform mapping ``source`` onto ``target`` (Umeyama 1991).
-
-    Args:
-        source, target: (K, 3) corresponding points, metres, K >= 3 not collinear.
-        with_scale: estimate a uniform scale (else rigid, scale 1).
-    """
-    source = np.asarray(source, dtype=np.float64)
-    target = np.asarray(target, dtype=np.float64)
-    if source.shape != target.shape or source.ndim != 2 or source.shape[1] != 3:
-        raise ValueError(
-            f"source and target landmarks must both have shape (K, 3); got {source.shape} "
-            f"and {target.shape}"
-        )
-    if len(source) < 3:
-        raise ValueError(f"need at least 3 landmark pairs, got {len(source)}")
-    mu_s, mu_t = source.mean(0), target.mean(0)
-    xs, xt = source - mu_s, target - mu_t
-    cov = xt.T @ xs / len(source)
-    u, sig, vt = np.linalg.svd(cov)
-    if sig[1] <= 1e-12 * max(sig[0], 1e-300):
-        raise ValueError("landmarks are collinear or coincident; the transform is undetermined")
-    s = np.ones(3)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0:
-        s[2] = -1.0
-    rot = u @ np.diag(s) @ vt
-    var_s = np.sum(xs**2) / len(source)
-    scale = float(np.sum(sig * s) / var_s) if with_scale else 1.0
-    return Similarity(scale=scale, rotation=rot, translation=mu_t - scale * rot @ mu_s)
+from physanim.tracking.similarity import Transform, fit_transform
 
 
 @dataclass(frozen=True)
@@ -188,7 +146,7 @@ class Alignment:
         vertices: (V, 3) the aligned neutral wireframe, metres.
     """
 
-    similarity: Similarity
+    similarity: Transform
     axis_scales: AxisScales | None
     offset: np.ndarray
     vertices: np.ndarray
@@ -232,7 +190,7 @@ def align_motion_mesh(
     lm = np.asarray(landmark_vertex_indices, dtype=np.int64)
     targets = np.asarray(scan_landmarks, dtype=np.float64)
     per_axis = params.scaling == "per_axis"
-    sim = umeyama(v[lm], targets, with_scale=not per_axis)
+    sim = fit_transform(v[lm], targets, with_scale=not per_axis)
     x = sim.apply(v)
     scales = None
     if per_axis:
