@@ -126,16 +126,3 @@ def rasterize(
         bary=bary_img.reshape(height, width, 3),
         depth=depth_img.reshape(height, width),
     )
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (N, 3) of a mesh (N, 3) m / (M, 3)."""
-    tri = vertices[faces]
-    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    idx = faces.ravel()
-    vn = np.stack(
-        [np.bincount(idx, np.repeat(fn[:, c], 3), minlength=len(vertices)) for c in range(3)],
-        axis=1,
-    )
-    norm = np.linalg.norm(vn, axis=1, keepdims=True)
-    return vn / np.where(norm > 0, norm, 1.0)

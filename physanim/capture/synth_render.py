@@ -15,7 +15,8 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from physanim.capture.raster import rasterize, vertex_normals
+from physanim.capture.raster import rasterize
+from physanim.mesh.topology import vertex_normals
 
 SKIN_RGB = np.array([0.80, 0.58, 0.47])
 MARKER_RGB = np.array([0.22, 0.36, 0.42])

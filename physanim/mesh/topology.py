@@ -61,9 +61,10 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # 2 * area * normal
-    n = np.zeros_like(v)
-    for c in range(3):
-        np.add.at(n, f[:, c], fn)
+    idx = f.ravel()  # bincount: several times faster than np.add.at
+    n = np.stack(
+        [np.bincount(idx, np.repeat(fn[:, c], 3), minlength=len(v)) for c in range(3)], axis=1
+    )
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     return n / np.where(norm > 0.0, norm, 1.0)
 

@@ -43,7 +43,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure as MplFigure
 
-from physanim.capture.raster import rasterize, vertex_normals
+from physanim.capture.raster import rasterize
+from physanim.mesh.topology import vertex_normals
 
 #: default skin albedo, sRGB 0-1
 SKIN = (0.89, 0.72, 0.62)
