@@ -36,11 +36,22 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
 
 def face_report(store: StageStore, entries: list[PlanEntry], config: BaseModel) -> Path | None:
-    """The face run's HTML report in ``<run dir>/report/`` (variants side by side)."""
+    """The face run's HTML report in ``<run dir>/report/`` (variants side by side).
+
+    Rebuilt when a stage ran or the latest render changed since it was written, so a warm run
+    that changes nothing costs nothing here.
+    """
     from physanim.render.run_report import write_run_report
 
     dataset = config.dataset  # type: ignore[attr-defined]
-    return write_run_report(store, entries, dataset.run_dir / "report", f"physanim: {dataset.name}")
+    out = dataset.run_dir / "report"
+    index, pointer = out / "index.html", store.root / "render" / "LATEST"
+    fresh = index.exists() and (
+        not pointer.exists() or pointer.stat().st_mtime <= index.stat().st_mtime
+    )
+    if fresh and not any(e.action == "run" for e in entries):
+        return index
+    return write_run_report(store, entries, out, f"physanim: {dataset.name}")
 
 
 FACE = Pipeline(

@@ -22,7 +22,7 @@ from rich.console import Console
 from rich.table import Table
 
 from physanim.config import ConfigError, load_config
-from physanim.pipeline import Pipeline, PlanEntry, StageResult, make_plan
+from physanim.pipeline import Pipeline, PlanEntry, StageFailed, StageResult, make_plan
 from physanim.pipeline.spec import dataset_overrides
 from physanim.store import StageOutputMissing, StageStore
 
@@ -134,12 +134,33 @@ def run(
         if made:
             console.print(f"generated {made}")
     store, entries = _plan(dag, cfg, only, start, force)
-    for stale in store.remove_stale_temporaries():
-        console.print(f"removed abandoned partial output {stale.name}")
+    for leftover in store.remove_stale_temporaries():
+        console.print(f"removed abandoned partial output {leftover.name}")
     todo = [e for e in entries if e.action == "run"]
-    from physanim.pipeline import execute_plan_locally
+    try:
+        _execute(dag, cfg, store, entries, local=local or not todo)
+    except StageFailed as exc:
+        console.print(f"[red]error:[/red] {exc}", highlight=False)
+        console.print("(outputs of the stages before it are kept; fix and run again)")
+        raise typer.Exit(1) from None
+    if dag.report is not None:
+        report = dag.report(store, entries, cfg)
+        if report is not None:
+            console.print(f"report: {report}")
+    console.print(
+        f"{pipeline}: {len(todo)} stage(s) ran, {len(entries) - len(todo)} cached/skipped, "
+        f"{time.perf_counter() - t0:.1f} s; store {store.root}"
+    )
 
-    if not todo or local:
+
+def _execute(
+    dag: Pipeline, cfg: BaseModel, store: StageStore, entries: list[PlanEntry], local: bool
+) -> None:
+    """Run the plan here (``local``) or as a Prefect flow, logging one line per stage."""
+    from physanim.pipeline import execute_plan_locally
+    from physanim.pipeline.progress import rich_progress
+
+    if local:
         with rich_progress(console) as progress:
             execute_plan_locally(dag, cfg, entries, progress, on_result=_log_result)
     else:
@@ -156,14 +177,6 @@ def run(
             named = pipeline_flow.with_options(name=f"physanim-{dag.name}")
             for r in named(dag, cfg, entries, progress):
                 _log_result(r)
-    if dag.report is not None and (todo or not (cfg.dataset.run_dir / "report").exists()):
-        report = dag.report(store, entries, cfg)
-        if report is not None:
-            console.print(f"report: {report}")
-    console.print(
-        f"{pipeline}: {len(todo)} stage(s) ran, {len(entries) - len(todo)} cached/skipped, "
-        f"{time.perf_counter() - t0:.1f} s; store {store.root}"
-    )
 
 
 @app.command()

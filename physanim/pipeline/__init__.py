@@ -2,7 +2,12 @@
 
 from physanim.pipeline.context import ProgressFactory, ProgressFn, StageContext
 from physanim.pipeline.plan import PlanEntry, make_plan
-from physanim.pipeline.runner import StageResult, execute_plan_locally, execute_stage
+from physanim.pipeline.runner import (
+    StageFailed,
+    StageResult,
+    execute_plan_locally,
+    execute_stage,
+)
 from physanim.pipeline.spec import DatasetParams, Pipeline, StageSpec
 
 __all__ = [
@@ -12,6 +17,7 @@ __all__ = [
     "ProgressFactory",
     "ProgressFn",
     "StageContext",
+    "StageFailed",
     "StageResult",
     "StageSpec",
     "execute_plan_locally",

@@ -15,6 +15,14 @@ from physanim.pipeline.spec import Pipeline
 from physanim.store import StageStore
 
 
+class StageFailed(RuntimeError):
+    """A stage's compute raised; the message names the stage and the original error."""
+
+    def __init__(self, stage: str, error: BaseException) -> None:
+        super().__init__(f"stage '{stage}' failed: {type(error).__name__}: {error}")
+        self.stage = stage
+
+
 @dataclass(frozen=True)
 class StageResult:
     """Outcome of one stage in a run: ``ran`` or ``cached``, with its wall time in seconds."""
@@ -66,7 +74,10 @@ def execute_stage(
             out=group,
             progress=progress or _no_progress,
         )
-        spec.compute(ctx)
+        try:
+            spec.compute(ctx)
+        except Exception as exc:
+            raise StageFailed(spec.name, exc) from exc
         if ctx.summary:
             group.attrs["summary"] = ctx.summary
     store.set_latest(spec.name, entry.key)

@@ -93,6 +93,21 @@ def read_dataclass(cls: type[T], group: zarr.Group) -> T:
     return cls(**kwargs)
 
 
+def _ensure_group(path: Path) -> None:
+    """Make ``path`` an (empty) Zarr v3 group if it is not one; safe when processes race.
+
+    The metadata is written to a temporary file and renamed into place, so a concurrent
+    reader never sees a half-written zarr.json (Zarr's own writer gives no such guarantee).
+    """
+    meta = path / "zarr.json"
+    if meta.exists():
+        return
+    path.mkdir(parents=True, exist_ok=True)
+    tmp = path / f".zarr.json.{uuid.uuid4().hex}"
+    tmp.write_text(json.dumps({"zarr_format": 3, "node_type": "group", "attributes": {}}))
+    os.replace(tmp, meta)
+
+
 def _pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -108,9 +123,7 @@ class StageStore:
 
     def __init__(self, root: str | os.PathLike[str]) -> None:
         self.root = Path(root)
-        self.root.mkdir(parents=True, exist_ok=True)
-        if not (self.root / "zarr.json").exists():
-            zarr.open_group(self.root, mode="a")
+        _ensure_group(self.root)
         (self.root / TMP).mkdir(exist_ok=True)
 
     # -- reading ---------------------------------------------------------------------------
@@ -167,14 +180,13 @@ class StageStore:
         """Point the stage's default output at ``key`` (atomic replace of the pointer file)."""
         if not self.has(stage, key):
             raise StageOutputMissing(f"cannot point '{stage}' at missing key {key[:12]}")
+        if self.latest(stage) == key:
+            return  # unchanged: keep the pointer's mtime (reports compare against it)
         tmp = self.root / stage / f".{LATEST}.{uuid.uuid4().hex}"
         tmp.write_text(key + "\n")
         os.replace(tmp, self.root / stage / LATEST)
 
     # -- writing ---------------------------------------------------------------------------
-    def _ensure_stage_group(self, stage: str) -> None:
-        if not (self.root / stage / "zarr.json").exists():
-            zarr.open_group(self.root, mode="a").require_group(stage)
 
     @contextlib.contextmanager
     def writing(self, stage: str, key: str, provenance: dict[str, Any]) -> Iterator[zarr.Group]:
@@ -183,7 +195,7 @@ class StageStore:
         On an exception the temporary copy is removed and the exception propagates.  If another
         writer committed the same key meanwhile, this copy is discarded (same content key).
         """
-        self._ensure_stage_group(stage)
+        _ensure_group(self.root / stage)
         host = socket.gethostname()
         tmp = self.root / TMP / f"{stage}-{key[:16]}-{host}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
         t0 = time.time()

@@ -109,3 +109,12 @@ def test_frame_chunks_split_frames_only() -> None:
     assert frame_chunks((90, 480, 640, 3), 1) == (4, 480, 640, 3)
     assert frame_chunks((5, 3000, 3000), 8) == (1, 3000, 3000)
     assert frame_chunks((7,), 8) == (7,)
+
+
+def test_failing_stage_is_named_and_leaves_no_output(toy_config: Path, tmp_path: Path) -> None:
+    env = {"PHYSANIM_TOY_LOG": str(tmp_path / "executions.log")}
+    args = ["run", "-p", TOY, "-c", str(toy_config), "--local", "--set", "source.fail_at=3"]
+    out, _ = cli(*args, env=env).communicate(timeout=120)
+    assert "error: stage 'source' failed: ValueError: bad frame 3 (source.fail_at)" in out
+    store = StageStore(tmp_path / "data" / "runs" / "store.zarr")
+    assert store.keys("source") == [] and list((store.root / TMP).iterdir()) == []

@@ -27,6 +27,7 @@ class SourceParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
     n_frames: int = Field(8, ge=1, le=10_000, description="frames")
     slow_s: float = Field(0.0, ge=0.0, description="sleep between frames, s (for kill tests)")
+    fail_at: int = Field(-1, description="raise ValueError at this frame (-1: never)")
 
 
 class ScaleParams(BaseModel):
@@ -44,6 +45,8 @@ def source(ctx: StageContext) -> None:
     arr = ctx.out.create_array("ramp", shape=(p.n_frames, 1000), dtype="f8", chunks=(1, 1000))
     report = ctx.progress("source")
     for i in range(p.n_frames):
+        if i == p.fail_at:
+            raise ValueError(f"bad frame {i} (source.fail_at)")
         arr[i] = np.arange(1000.0) + i
         report(i + 1, p.n_frames)
         time.sleep(p.slow_s)
