@@ -38,8 +38,6 @@ class Newmark:
     K, M, C: (n, n) sparse, N/m, kg, N s/m. dt: step, s. prescribed: (n_c,) DOF indices.
     split: optional (K_el, G, w) with K = K_el + G^T diag(w) G (the 'anp' model), which lets
     CHOLMOD factorise a sparser augmented matrix (see ``factorize_split``).
-    held: optional (n_h,) prescribed DOF indices that never move (fixed nodes); ``dissipation``
-    skips their rows and columns of C, which their zero displacement increment leaves out.
     """
 
     def __init__(
@@ -51,7 +49,6 @@ class Newmark:
         prescribed: np.ndarray,
         solver: str = "auto",
         split: tuple[sp.spmatrix, sp.spmatrix, np.ndarray] | None = None,
-        held: np.ndarray | None = None,
     ) -> None:
         n = K.shape[0]
         self.dt = float(dt)
@@ -74,8 +71,6 @@ class Newmark:
             [rows(self.M), rows(self.C), rows(self.K)[:, self.prescribed]], format="csr"
         )
         self._x = np.zeros(self._H.shape[1])
-        self._moving = free_dofs(n, np.zeros(0, np.int64) if held is None else held)
-        self._C_moving = self.C[self._moving][:, self._moving]
 
     def initial_acceleration(self, state: State, f: np.ndarray | None = None) -> np.ndarray:
         """Free-DOF accelerations from M a = f - K d - C v (prescribed ones kept); in place."""
@@ -92,11 +87,9 @@ class Newmark:
     def dissipation(self, delta: np.ndarray) -> float:
         """Viscous energy (J) dissipated over the last step, delta = d_{t+1} - d_t (n,) m.
 
-        Exact for this scheme: the mid-step velocity is delta / dt. delta must be zero on
-        the ``held`` DOFs.
+        Exact for this scheme: the mid-step velocity is delta / dt.
         """
-        dm = delta[self._moving]
-        return float(dm @ (self._C_moving @ dm)) / self.dt
+        return float(delta @ (self.C @ delta)) / self.dt
 
     def step(
         self,

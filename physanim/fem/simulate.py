@@ -120,9 +120,7 @@ def simulate(
             model, h, pres, params.solver, params.corot_rtol, params.corot_max_iter
         )
     else:
-        integ = Newmark(
-            model.K, model.M, model.C, h, pres, params.solver, model.split, _dofs(fixed_idx)
-        )
+        integ = Newmark(model.K, model.M, model.C, h, pres, params.solver, model.split)
     t_fac = time.perf_counter() - t0
 
     def prescribed(times: np.ndarray):
