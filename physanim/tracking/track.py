@@ -15,7 +15,6 @@ from scipy.spatial import cKDTree
 
 from physanim.tracking.detect import detect_markers
 from physanim.tracking.label import assign, label_markers
-from physanim.tracking.lift import lift_depth
 from physanim.tracking.params import TrackParams
 from physanim.tracking.similarity import fit_transform
 from physanim.tracking.smooth import kalman_rts, one_euro
@@ -179,13 +178,7 @@ def track_markers_rgbd(
     """
     if len(colors) != len(depths):
         raise ValueError(f"colors ({len(colors)}) and depths ({len(depths)}): frame counts differ")
+    from physanim.tracking.assemble import tracks_from_depth  # assemble imports this module
+
     uv, conf = track_markers_2d(colors, frontal_template(template_actor), params, progress)
-    raw = np.stack(
-        [lift_depth(uv[t], depths[t], K, params.depth_window_px) for t in range(len(uv))]
-    )
-    conf = np.where(np.isfinite(raw).all(axis=2), conf, 0.0)
-    points = smooth_tracks(raw, fps, params)
-    uv = np.where(conf[..., None] > 0, uv, np.nan)
-    return Tracks(
-        uv=uv, points=points, confidence=conf, head_pose=head_poses(points, conf, template_actor)
-    )
+    return tracks_from_depth(uv, conf, depths, K, template_actor, fps, params)
