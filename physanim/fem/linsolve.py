@@ -9,6 +9,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from physanim.fem.parallel_ldl import ParallelLDL
+
 Solve = Callable[[np.ndarray], np.ndarray]
 SOLVERS = ("auto", "cholmod", "superlu", "superlu_colamd")
 
@@ -38,26 +40,34 @@ def _without_subnormals(solve: Solve, n: int) -> Solve:
     return guarded
 
 
+def _cholmod_ldl(A: sp.csc_matrix) -> ParallelLDL:
+    """CHOLMOD's fill-reducing ordering and simplicial LDL^T of A, solved on all threads."""
+    if not has_cholmod():
+        raise ModuleNotFoundError(
+            "solver 'cholmod' needs scikit-sparse: apt-get install libsuitesparse-dev, then "
+            "pip install 'scikit-sparse<0.5' (or choose solver 'superlu')"
+        )
+    from sksparse.cholmod import cholesky
+
+    factor = cholesky(A, mode="simplicial")
+    L, D = factor.L_D()
+    return ParallelLDL(L, D.diagonal(), factor.P())
+
+
 def factorize(A: sp.spmatrix, solver: str = "auto") -> Solve:
     """Factorise the SPD matrix ``A`` (n, n) and return ``solve(b) -> x`` for b (n,) or (n, k).
 
-    solver: 'cholmod' (supernodal Cholesky, AMD/METIS ordering), 'superlu' (SuperLU with
-    MMD(A^T+A) ordering and symmetric pivoting, right for SPD matrices), 'superlu_colamd'
-    (scipy's default splu, the baseline) or 'auto' (cholmod when installed, else superlu).
+    solver: 'cholmod' (CHOLMOD's fill-reducing ordering and LDL^T factor, solved by
+    ``ParallelLDL`` on all threads), 'superlu' (SuperLU with MMD(A^T+A) ordering and symmetric
+    pivoting, right for SPD matrices), 'superlu_colamd' (scipy's default splu, the baseline)
+    or 'auto' (cholmod when installed, else superlu).
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     if solver == "auto":
         solver = "cholmod" if has_cholmod() else "superlu"
     if solver == "cholmod":
-        if not has_cholmod():
-            raise ModuleNotFoundError(
-                "solver 'cholmod' needs scikit-sparse: apt-get install libsuitesparse-dev, then "
-                "pip install 'scikit-sparse<0.5' (or choose solver 'superlu')"
-            )
-        from sksparse.cholmod import cholesky
-
-        return _without_subnormals(cholesky(sp.csc_matrix(A)), A.shape[0])
+        return _without_subnormals(_cholmod_ldl(sp.csc_matrix(A)), A.shape[0])
     if solver == "superlu":
         lu = spla.splu(
             sp.csc_matrix(A),
@@ -84,15 +94,11 @@ def factorize_split(
         solver = "cholmod" if has_cholmod() else "superlu"
     if solver != "cholmod":
         return factorize((A_el + G.T @ sp.diags(w) @ G).tocsc(), solver)
-    factorize(sp.eye(1, format="csc"), "cholmod")  # raises the install hint when missing
-    from sksparse.cholmod import cholesky
-
     n = A_el.shape[0]
-    aug = sp.bmat([[A_el, G.T], [G, sp.diags(-1.0 / w)]], format="csc")
-    factor = cholesky(aug, mode="simplicial")
+    factor = _cholmod_ldl(sp.bmat([[A_el, G.T], [G, sp.diags(-1.0 / w)]], format="csc"))
 
     def solve(b: np.ndarray) -> np.ndarray:
-        rhs = np.zeros((aug.shape[0],) + b.shape[1:])
+        rhs = np.zeros((factor.n,) + b.shape[1:])
         rhs[:n] = b
         return factor(rhs)[:n]
 

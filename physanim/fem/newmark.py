@@ -14,8 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from physanim.fem.linsolve import Solve, factorize, factorize_split
+from physanim.fem.parallel_spmv import ParallelCSR
 from physanim.fem.statics import free_dofs
 
 
@@ -67,10 +69,11 @@ class Newmark:
             self.solve = factorize_split(A_el, sp.csr_matrix(G)[:, self.free], w, solver)
         # rhs_u = [M_u: | C_u: | K_uc] @ [x_m; x_c; -d_c] in a single sparse product
         rows = lambda X: X[self.free]  # noqa: E731
-        self._H = sp.hstack(
-            [rows(self.M), rows(self.C), rows(self.K)[:, self.prescribed]], format="csr"
+        self._H = ParallelCSR(
+            sp.hstack([rows(self.M), rows(self.C), rows(self.K)[:, self.prescribed]])
         )
         self._x = np.zeros(self._H.shape[1])
+        self._C = ParallelCSR(self.C)
 
     def initial_acceleration(self, state: State, f: np.ndarray | None = None) -> np.ndarray:
         """Free-DOF accelerations from M a = f - K d - C v (prescribed ones kept); in place."""
@@ -89,7 +92,7 @@ class Newmark:
 
         Exact for this scheme: the mid-step velocity is delta / dt.
         """
-        return float(delta @ (self.C @ delta)) / self.dt
+        return self._C.quadratic_form(delta) / self.dt
 
     def step(
         self,
@@ -100,21 +103,38 @@ class Newmark:
         f_u: np.ndarray | None = None,
     ) -> State:
         """Advance ``state`` (in place) by dt with prescribed d_c, v_c, a_c (n_c,) at t + dt."""
-        dt, u, c, n = self.dt, self.free, self.prescribed, len(state.d)
-        x = self._x
-        xm, xc = x[:n], x[n : 2 * n]
-        xm[u] = (4.0 / dt**2) * state.d[u] + (4.0 / dt) * state.v[u] + state.a[u]
-        xm[c] = -a_c
-        xc[u] = (2.0 / dt) * state.d[u] + state.v[u]
-        xc[c] = -v_c
-        x[2 * n :] = -d_c
+        x, dt = self._x, self.dt
+        _pack_rhs(state.d, state.v, state.a, self.free, self.prescribed, d_c, v_c, a_c, dt, x)
         rhs = self._H @ x
         if f_u is not None:
             rhs += f_u
-        d_u = self.solve(rhs)
-        a_u = (4.0 / dt**2) * (d_u - state.d[u]) - (4.0 / dt) * state.v[u] - state.a[u]
-        state.v[u] += 0.5 * dt * (state.a[u] + a_u)
-        state.a[u] = a_u
-        state.d[u] = d_u
-        state.d[c], state.v[c], state.a[c] = d_c, v_c, a_c
+        _advance(state.d, state.v, state.a, self.free, self.solve(rhs), dt)
+        state.d[self.prescribed], state.v[self.prescribed] = d_c, v_c
+        state.a[self.prescribed] = a_c
         return state
+
+
+# The per-step vector updates as two compiled loops: as numpy expressions over the free
+# DOFs they were a dozen gathers and temporaries, ~1 ms of a ~10 ms step.
+@njit(cache=True)
+def _pack_rhs(d, v, a, u, c, d_c, v_c, a_c, dt, x):
+    """x = [x_m; x_c; -d_c] with x_m = (4/dt^2) d + (4/dt) v + a, x_c = (2/dt) d + v on u."""
+    n = d.size
+    for i in u:
+        x[i] = (4.0 / dt**2) * d[i] + (4.0 / dt) * v[i] + a[i]
+        x[n + i] = (2.0 / dt) * d[i] + v[i]
+    for k in range(c.size):
+        x[c[k]] = -a_c[k]
+        x[n + c[k]] = -v_c[k]
+        x[2 * n + k] = -d_c[k]
+
+
+@njit(cache=True)
+def _advance(d, v, a, u, d_u, dt):
+    """Newmark update of the free DOFs u given their new displacements d_u."""
+    for k in range(u.size):
+        i = u[k]
+        a_new = (4.0 / dt**2) * (d_u[k] - d[i]) - (4.0 / dt) * v[i] - a[i]
+        v[i] += 0.5 * dt * (a[i] + a_new)
+        a[i] = a_new
+        d[i] = d_u[k]
