@@ -49,7 +49,8 @@ def _cholmod_ldl(A: sp.csc_matrix) -> ParallelLDL:
         )
     from sksparse.cholmod import cholesky
 
-    factor = cholesky(A, mode="simplicial")
+    # 'best' tries AMD, METIS and nested dissection and keeps the sparsest factor
+    factor = cholesky(A, mode="simplicial", ordering_method="best")
     L, D = factor.L_D()
     return ParallelLDL(L, D.diagonal(), factor.P())
 

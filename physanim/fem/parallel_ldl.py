@@ -109,7 +109,7 @@ def _partition(
         bins = [0.0] * n_bins
         members: list[list[int]] = [[] for _ in range(n_bins)]
         for w, j in cands:
-            b = int(np.argmin(bins))
+            b = min(range(n_bins), key=bins.__getitem__)
             bins[b] -= w
             members[b].append(j)
         cost = top_w + max(bins)

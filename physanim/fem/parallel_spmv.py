@@ -64,6 +64,7 @@ class ParallelCSR:
     def __init__(self, A: sp.spmatrix, n_threads: int | None = None) -> None:
         A = sp.csr_matrix(A)
         A.sum_duplicates()
+        A.eliminate_zeros()  # e.g. the consistent mass stores 3x3 blocks that are m_ij I
         self.shape = A.shape
         # unsigned indices spare numba's negative-index wraparound on every load
         self.indptr = A.indptr.astype(np.int64)
