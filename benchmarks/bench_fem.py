@@ -12,6 +12,7 @@ import argparse
 import resource
 import time
 
+import numba
 import numpy as np
 import pytetwild
 import pyvista as pv
@@ -95,17 +96,20 @@ def main() -> None:
     mat = TetMaterials.uniform(len(tets))
     pres = (3 * np.concatenate([driven, fixed])[:, None] + np.arange(3)).ravel()
 
+    all_threads = numba.get_num_threads()
     print(f"\n{'config':34s} {'assembly s':>10s} {'factor s':>9s} {'ms/step':>8s} {'RTF':>6s}")
     for form in ("anp", "p1"):
         t0 = time.perf_counter()
         model = build_model(nodes, tets, mat, SimulateParams(formulation=form))
         t_asm = time.perf_counter() - t0
-        for solver in ("cholmod", "superlu", "superlu_colamd"):
-            n = args.baseline_steps
-            t_fac, per_step, _ = time_steps(model, pres, dt, solver, n)
+        for solver, threads in (("cholmod", all_threads), ("cholmod", 1), ("superlu", 1),
+                                ("superlu_colamd", 1)):  # fmt: skip
+            numba.set_num_threads(threads)  # our solve and products; SuperLU is serial anyway
+            t_fac, per_step, _ = time_steps(model, pres, dt, solver, args.baseline_steps)
+            numba.set_num_threads(all_threads)
+            name = f"{form} / {solver}" + (f", {threads} thread(s)" if solver == "cholmod" else "")
             print(
-                f"{form + ' / ' + solver:34s} {t_asm:10.2f} {t_fac:9.2f} "
-                f"{1e3 * per_step:8.2f} {dt / per_step:6.2f}"
+                f"{name:34s} {t_asm:10.2f} {t_fac:9.2f} {1e3 * per_step:8.2f} {dt / per_step:6.2f}"
             )
 
     params = SimulateParams(dt=dt)

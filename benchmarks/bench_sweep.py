@@ -1,9 +1,12 @@
 """Sweep wall time: four material models on 2 Dask workers vs one after another, same run.
 
-Prepares a short demo and its shared stages (ingest .. tetra) once, copies the store twice,
+Prepares a short demo and its shared stages (ingest .. tetra) once, copies the store per mode,
 then runs the same sweep (uniform, model1, model2, model3: materials, simulate, evaluate,
-render per variant) serially in this process and on a local Dask cluster through Prefect.
-Usage: python benchmarks/bench_sweep.py [--frames 30]
+render per variant) three ways: serially in this process without Prefect, through Prefect on
+one Dask worker (all cores), and through Prefect on ``--workers`` Dask workers (the cores
+shared out). Prefect's temporary server is started before the timed runs, so both Prefect
+runs pay only their own cluster start.
+Usage: python benchmarks/bench_sweep.py [--frames 30] [--workers 2]
 """
 
 from __future__ import annotations
@@ -44,7 +47,7 @@ def main() -> None:
         print(f"shared stages (ingest..tetra): {time.perf_counter() - t0:.1f} s")
 
         sweeps = {}
-        for mode in ("serial", "dask"):
+        for mode in ("serial", "dask1", "dask"):
             copy = Path(tmp) / f"store_{mode}.zarr"
             shutil.copytree(store.root, copy)
             sweep = Path(tmp) / f"sweep_{mode}.yaml"
@@ -59,15 +62,25 @@ def main() -> None:
             sweeps[mode] = sweep
 
         configure(Path(tmp) / "runs")
+        from prefect import flow
+
         from flows.sweep import run_sweep
 
+        t0 = time.perf_counter()
+        flow(name="warm-up")(lambda: None)()
+        print(f"Prefect temporary server start: {time.perf_counter() - t0:.1f} s")
         serial = run_sweep(sweeps["serial"], serial=True)
+        one = run_sweep(sweeps["dask1"], workers=1)
         dask = run_sweep(sweeps["dask"], workers=args.workers)
     print(f"{len(MODELS)} variants x (materials, simulate, evaluate, render), {args.frames} frames")
-    print(f"  serial, one process : {serial.seconds:7.1f} s  ({len(serial.results)} stage runs)")
     print(
-        f"  Dask, {args.workers} workers     : {dask.seconds:7.1f} s  ({len(dask.results)} stage "
-        f"runs; includes Prefect and cluster start)  ratio {dask.seconds / serial.seconds:.2f}"
+        f"  serial, one process, no Prefect : {serial.seconds:7.1f} s  ({len(serial.results)} runs)"
+    )
+    print(f"  Prefect + Dask, 1 worker        : {one.seconds:7.1f} s  ({len(one.results)} runs)")
+    print(
+        f"  Prefect + Dask, {args.workers} workers       : {dask.seconds:7.1f} s  "
+        f"({len(dask.results)} runs)  ratio to 1 worker {dask.seconds / one.seconds:.2f}, "
+        f"to serial {dask.seconds / serial.seconds:.2f}"
     )
 
 

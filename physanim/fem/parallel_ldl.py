@@ -23,6 +23,8 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
+import physanim.fem.numba_threads  # noqa: F401  (threading layer, before compiling)
+
 
 @njit(cache=True)
 def _subtree_sizes(parent: np.ndarray) -> np.ndarray:
@@ -145,7 +147,7 @@ def _pack_blocks(indptr, indices, data, starts, widths, roff, boff, toff, rows, 
                 vals[boff[s] + b * m + r] = data[q + r]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, fastmath=True)
 def _forward_block(s, y, starts, widths, roff, rows, boff, vals, toff, tri, n_own, buf, tmp):
     c0, w = starts[s], widths[s]
     for b in range(w):
@@ -165,7 +167,7 @@ def _forward_block(s, y, starts, widths, roff, rows, boff, vals, toff, tri, n_ow
         buf[rows[roff[s] + r]] -= tmp[r]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, fastmath=True)
 def _backward_block(s, y, x, dinv, starts, widths, roff, rows, boff, vals, toff, tri, tmp):
     c0, w = starts[s], widths[s]
     m = roff[s + 1] - roff[s]

@@ -14,6 +14,8 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
+import physanim.fem.numba_threads  # noqa: F401  (threading layer, before compiling)
+
 
 @njit(cache=True, inline="always")
 def _row_dot(indptr, indices, data, x, i):

@@ -37,6 +37,15 @@ def test_expansion_grid_times_list(tmp_path: Path) -> None:
         load_sweep(f)
 
 
+def test_worker_thread_env_shares_out_the_cores() -> None:
+    from flows.sweep import THREAD_ENV, worker_thread_env
+
+    assert worker_thread_env(2, cores=2) == dict.fromkeys(THREAD_ENV, "1")
+    assert worker_thread_env(1, cores=2)["NUMBA_NUM_THREADS"] == "2"
+    assert worker_thread_env(3, cores=8)["OMP_NUM_THREADS"] == "2"
+    assert worker_thread_env(4, cores=2)["OPENBLAS_NUM_THREADS"] == "1"
+
+
 def test_sweep_on_dask_computes_shared_stage_once(toy_config: Path, tmp_path: Path) -> None:
     sweep = tmp_path / "sweep.yaml"
     data = tmp_path / "data"
@@ -50,6 +59,9 @@ def test_sweep_on_dask_computes_shared_stage_once(toy_config: Path, tmp_path: Pa
     assert out.returncode == 0, out.stderr[-3000:]
     ran = executions(tmp_path)
     assert sorted(ran) == ["scale"] * 3 + ["source"] + ["total"] * 3
+    # each of the 2 local workers got half the cores for its numba / OpenMP / BLAS pools
+    threads = set((tmp_path / "executions.log.threads").read_text().split())
+    assert threads == {str(max(1, (os.cpu_count() or 1) // 2))}
     store = StageStore(tmp_path / "data" / "runs" / "store.zarr")
     totals = sorted(float(store.open("total", k)["total"][0]) for k in store.keys("total"))
     base = 499500 * 8 + 1000 * 28

@@ -21,6 +21,8 @@ def _log(name: str) -> None:
     if log:
         with open(log, "a") as f:
             f.write(name + "\n")
+        with open(log + ".threads", "a") as f:  # the worker's numba thread budget
+            f.write(os.environ.get("NUMBA_NUM_THREADS", "unset") + "\n")
 
 
 class SourceParams(BaseModel):
