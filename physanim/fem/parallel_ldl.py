@@ -147,13 +147,29 @@ def _pack_blocks(indptr, indices, data, starts, widths, roff, boff, toff, rows, 
                 vals[boff[s] + b * m + r] = data[q + r]
 
 
-@njit(cache=True, fastmath=True)
-def _forward_block(s, y, starts, widths, roff, rows, boff, vals, toff, tri, n_own, buf, tmp):
-    c0, w = starts[s], widths[s]
+@njit(cache=True)
+def _unit_lower_solve(y, c0, w, tri, off):
+    """y[c0:c0+w] <- T^-1 y[c0:c0+w] for the supernode's unit lower triangle T (at tri[off:])."""
     for b in range(w):
         yb = y[c0 + b]
         for a in range(b + 1, w):
-            y[c0 + a] -= tri[toff[s] + b * w + a] * yb
+            y[c0 + a] -= tri[off + b * w + a] * yb
+
+
+@njit(cache=True)
+def _unit_upper_solve(x, c0, w, tri, off):
+    """x[c0:c0+w] <- T^-T x[c0:c0+w] (the transpose of ``_unit_lower_solve``)."""
+    for b in range(w - 2, -1, -1):
+        acc = x[c0 + b]
+        for a in range(b + 1, w):
+            acc -= tri[off + b * w + a] * x[c0 + a]
+        x[c0 + b] = acc
+
+
+@njit(cache=True, fastmath=True)
+def _forward_block(s, y, starts, widths, roff, rows, boff, vals, toff, tri, n_own, buf, tmp):
+    c0, w = starts[s], widths[s]
+    _unit_lower_solve(y, c0, w, tri, toff[s])
     m = roff[s + 1] - roff[s]
     tmp[:m] = 0.0  # column by column over the block: contiguous, vectorised
     for b in range(w):
@@ -179,11 +195,7 @@ def _backward_block(s, y, x, dinv, starts, widths, roff, rows, boff, vals, toff,
         for r in range(m):
             acc -= vals[p + r] * tmp[r]
         x[c0 + b] = acc
-    for b in range(w - 2, -1, -1):
-        acc = x[c0 + b]
-        for a in range(b + 1, w):
-            acc -= tri[toff[s] + b * w + a] * x[c0 + a]
-        x[c0 + b] = acc
+    _unit_upper_solve(x, c0, w, tri, toff[s])
 
 
 @njit(cache=True, parallel=True, fastmath=True)
@@ -204,10 +216,7 @@ def _solve(b, perm, dinv, starts, widths, roff, rows, boff, vals, toff, tri, n_o
     for q in range(top_sn.size):  # top supernodes: one at a time, rows split over threads
         s = top_sn[q]
         c0, w, m, tm = starts[s], widths[s], roff[s + 1] - roff[s], tmp[0]
-        for j in range(w):
-            yj = y[c0 + j]
-            for a in range(j + 1, w):
-                y[c0 + a] -= tri[toff[s] + j * w + a] * yj
+        _unit_lower_solve(y, c0, w, tri, toff[s])
         for t in prange(n_bins):
             lo, hi = (m * t) // n_bins, (m * (t + 1)) // n_bins
             tm[lo:hi] = 0.0
@@ -230,11 +239,7 @@ def _solve(b, perm, dinv, starts, widths, roff, rows, boff, vals, toff, tri, n_o
                 for r in range(m):
                     acc -= vals[p + r] * tm[r]
                 x[c0 + j] = acc
-        for j in range(w - 2, -1, -1):
-            acc = x[c0 + j]
-            for a in range(j + 1, w):
-                acc -= tri[toff[s] + j * w + a] * x[c0 + a]
-            x[c0 + j] = acc
+        _unit_upper_solve(x, c0, w, tri, toff[s])
     for t in prange(n_bins):
         for q in range(bin_ptr[t + 1] - 1, bin_ptr[t] - 1, -1):
             _backward_block(bin_sn[q], y, x, dinv, starts, widths, roff, rows, boff, vals, toff,
