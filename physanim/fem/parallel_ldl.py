@@ -330,8 +330,6 @@ class ParallelLDL:
         self.buf = np.zeros((n_bins, n))
         self.tmp = np.zeros((n_bins, int(m.max(initial=0))))
         self._y, self._x = np.empty(n), np.empty(n)
-        self.n_threads = n_bins
-        self.nnz = int(Ls.nnz)
 
     def __call__(self, b: np.ndarray) -> np.ndarray:
         """x (n,) or (n, k) for b of the same shape."""
