@@ -17,7 +17,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from physanim.fem.linsolve import Solve, factorize, factorize_split
-from physanim.fem.parallel_spmv import ParallelCSR
+from physanim.fem.parallel_spmv import ParallelCSR, SymmetricQuadraticForm
 from physanim.fem.statics import free_dofs
 
 
@@ -73,7 +73,7 @@ class Newmark:
             sp.hstack([rows(self.M), rows(self.C), rows(self.K)[:, self.prescribed]])
         )
         self._x = np.zeros(self._H.shape[1])
-        self._C = ParallelCSR(self.C)
+        self._dissipation_form = SymmetricQuadraticForm(self.C)
 
     def initial_acceleration(self, state: State, f: np.ndarray | None = None) -> np.ndarray:
         """Free-DOF accelerations from M a = f - K d - C v (prescribed ones kept); in place."""
@@ -92,7 +92,7 @@ class Newmark:
 
         Exact for this scheme: the mid-step velocity is delta / dt.
         """
-        return self._C.quadratic_form(delta) / self.dt
+        return self._dissipation_form(delta) / self.dt
 
     def step(
         self,

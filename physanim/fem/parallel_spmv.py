@@ -2,9 +2,10 @@
 
 scipy's ``csr_matrix @ x`` runs on one core; a Newmark step multiplies ~1.6M stored entries
 per step, memory-bound, so splitting the rows over the cores (balanced by stored entries)
-nearly halves it on two cores. The quadratic form x^T A x is computed in the same pass, with
-no BLAS call: numpy's threaded BLAS stalled for milliseconds right after a numba parallel
-region here (both thread pools spinning on two cores).
+nearly halves it on two cores. The quadratic form x^T A x of a symmetric A reads only its
+upper triangle (half the bytes) and makes no BLAS call: numpy's threaded BLAS stalled for
+milliseconds right after a numba parallel region here (both thread pools spinning on two
+cores).
 """
 
 from __future__ import annotations
@@ -60,20 +61,31 @@ def _quadratic_form(indptr, indices, data, x, bounds):
     return parts.sum()
 
 
+def _row_bounds(A: sp.csr_matrix, n_threads: int | None) -> np.ndarray:
+    """Row ranges with equal stored entries, one per thread: (k + 1,) int64."""
+    k = max(1, int(n_threads or numba.get_num_threads()))
+    cuts = np.searchsorted(A.indptr, A.nnz * np.arange(1, k) / k)
+    return np.r_[0, cuts, A.shape[0]].astype(np.int64)
+
+
+def _compact(A: sp.spmatrix) -> sp.csr_matrix:
+    A = sp.csr_matrix(A, copy=True)
+    A.sum_duplicates()
+    A.eliminate_zeros()  # e.g. the consistent mass stores 3x3 blocks that are m_ij I
+    # unsigned indices spare numba's negative-index wraparound on every load
+    A.indices = A.indices.astype(np.uint32)
+    A.indptr = A.indptr.astype(np.int64)
+    return A
+
+
 class ParallelCSR:
     """y = A x for a fixed sparse A (n, m) on ``n_threads`` threads (numba's by default)."""
 
     def __init__(self, A: sp.spmatrix, n_threads: int | None = None) -> None:
-        A = sp.csr_matrix(A)
-        A.sum_duplicates()
-        A.eliminate_zeros()  # e.g. the consistent mass stores 3x3 blocks that are m_ij I
+        A = _compact(A)
         self.shape = A.shape
-        # unsigned indices spare numba's negative-index wraparound on every load
-        self.indptr = A.indptr.astype(np.int64)
-        self.indices, self.data = A.indices.astype(np.uint32), A.data
-        k = max(1, int(n_threads or numba.get_num_threads()))
-        cuts = np.searchsorted(A.indptr, A.nnz * np.arange(1, k) / k)  # equal entries per chunk
-        self.bounds = np.r_[0, cuts, A.shape[0]].astype(np.int64)
+        self.indptr, self.indices, self.data = A.indptr, A.indices, A.data
+        self.bounds = _row_bounds(A, n_threads)
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
         """A @ x for x (m,) float64; returns (n,)."""
@@ -81,7 +93,23 @@ class ParallelCSR:
         _matvec(self.indptr, self.indices, self.data, np.asarray(x, np.float64), self.bounds, out)
         return out
 
-    def quadratic_form(self, x: np.ndarray) -> float:
-        """x^T A x for a square A and x (n,) float64."""
+
+class SymmetricQuadraticForm:
+    """x^T A x for a fixed symmetric sparse A (n, n), from its upper triangle, on all threads.
+
+    Stores U = triu(A) with the off-diagonal entries doubled, so x^T A x = sum_i x_i (U x)_i.
+    """
+
+    def __init__(self, A: sp.spmatrix, n_threads: int | None = None) -> None:
+        A = sp.csr_matrix(A)
+        if A.shape[0] != A.shape[1]:
+            raise ValueError(f"quadratic form needs a square matrix, got {A.shape}")
+        U = _compact(sp.triu(A, 1, format="csr") * 2.0 + sp.diags(A.diagonal()))
+        self.n = A.shape[0]
+        self.indptr, self.indices, self.data = U.indptr, U.indices, U.data
+        self.bounds = _row_bounds(U, n_threads)
+
+    def __call__(self, x: np.ndarray) -> float:
+        """x^T A x for x (n,) float64."""
         x = np.asarray(x, np.float64)
         return float(_quadratic_form(self.indptr, self.indices, self.data, x, self.bounds))

@@ -11,7 +11,7 @@ from physanim.fem.linsolve import factorize, factorize_split, has_cholmod
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.parallel_ldl import ParallelLDL
-from physanim.fem.parallel_spmv import ParallelCSR
+from physanim.fem.parallel_spmv import ParallelCSR, SymmetricQuadraticForm
 from physanim.fem.params import SimulateParams
 from tests.fem.fem_meshes import box_mesh
 
@@ -91,6 +91,8 @@ def test_parallel_csr_product_and_quadratic_form(n_threads):
     x = rng.normal(size=280)
     P = ParallelCSR(A, n_threads)
     np.testing.assert_allclose(P @ x, A @ x, rtol=1e-13, atol=1e-14)
-    S = (A[:, :280] @ A[:, :280].T)[:280][:, :280]
+    S = (A[:, :280] @ A[:, :280].T)[:280][:, :280] - sp.eye(280)  # symmetric, indefinite
     y = rng.normal(size=280)
-    assert ParallelCSR(S, n_threads).quadratic_form(y) == pytest.approx(y @ (S @ y), rel=1e-12)
+    q = SymmetricQuadraticForm(S, n_threads)
+    assert q(y) == pytest.approx(y @ (S @ y), rel=1e-12)
+    assert q.data.size < 0.6 * S.nnz  # only the upper triangle is stored
