@@ -1,9 +1,10 @@
-"""Benchmark the FEM core on a face-scale tet mesh (~20k DOF): assembly, factorisation,
-time per Newmark step and real-time factor, default vs a plain-SuperLU baseline.
+"""Benchmark the FEM core on the demo face mesh (~20k DOF): assembly, factorisation, time
+per Newmark step and real-time factor, the default next to a plain-SuperLU baseline.
 
-Run: .venv/bin/python benchmarks/bench_fem.py [--edge 0.0053] [--steps 1000]
-The mesh is a curved 15 x 20 x 1.5 cm shell (face-like slab) tetrahedralised with fTetWild;
-back side fixed, 12 front nodes driven at 30 fps, dt = 1e-3 s, seed's uniform material.
+Run: .venv/bin/python benchmarks/bench_fem.py [--baseline-steps 100]
+Mesh, materials, fixed (bone-side) and driven nodes and the driven landmark trajectories are the
+demo pipeline's own (default config): its align, tetra and materials stages, computed into
+data/demo first when the store lacks them (several minutes, once).
 """
 
 from __future__ import annotations
@@ -11,55 +12,41 @@ from __future__ import annotations
 import argparse
 import resource
 import time
+from typing import Any
 
 import numba
 import numpy as np
-import pytetwild
-import pyvista as pv
 
-from physanim.fem.materials import TetMaterials
+from flows.dags import FACE
+from physanim.config import load_config
 from physanim.fem.model import build_model
 from physanim.fem.newmark import Newmark, State
 from physanim.fem.params import SimulateParams
 from physanim.fem.simulate import simulate
-
-CURV = 4.0  # 1/m, bend z += CURV x^2 (face-like curvature)
-
-
-def face_slab(edge: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Curved shell tets; returns nodes (N, 3) m, tets (M, 4), unbent thickness coord (N,)."""
-    box = pv.Box(bounds=(-0.075, 0.075, -0.1, 0.1, 0.0, 0.015), level=12).triangulate()
-    pts = np.asarray(box.points, dtype=np.float64)
-    pts[:, 2] += CURV * pts[:, 0] ** 2
-    faces = box.faces.reshape(-1, 4)[:, 1:].astype(np.int32)
-    nodes, tets = pytetwild.tetrahedralize(pts, faces, edge_length_abs=edge)
-    tets = tets.astype(np.int64)
-    x = nodes[tets]
-    neg = np.linalg.det(x[:, 1:] - x[:, :1]) < 0
-    tets[neg] = tets[neg][:, [0, 2, 1, 3]]
-    return nodes, tets, nodes[:, 2] - CURV * nodes[:, 0] ** 2
+from physanim.pipeline import execute_plan_locally, make_plan
+from physanim.pipeline.progress import rich_progress
+from physanim.pipeline.spec import dataset_overrides
+from physanim.store import StageStore
+from tasks.simulate import SimulateStageParams, simulate_inputs
 
 
-def boundary(nodes, depth, n_driven=12):
-    fixed = np.flatnonzero(depth < 1e-3)
-    front = np.flatnonzero(depth > 0.015 - 1e-3)
-    rng = np.random.default_rng(0)
-    targets = np.c_[rng.uniform(-0.05, 0.05, n_driven), rng.uniform(-0.07, 0.07, n_driven)]
-    dist = np.linalg.norm(nodes[front, None, :2] - targets[None], axis=2)
-    driven = np.unique(front[dist.argmin(axis=0)])
-    return fixed, driven
-
-
-def trajectories(n_frames, n_driven, frame_dt):
-    t = frame_dt * np.arange(n_frames)
-    rng = np.random.default_rng(1)
-    amp = rng.uniform(1e-3, 4e-3, (1, n_driven, 3))
-    phase = rng.uniform(0, np.pi, (1, n_driven, 3))
-    return (
-        amp
-        * np.sin(2 * np.pi * 1.5 * t[:, None, None] + phase)
-        * np.sin(np.pi * t)[:, None, None] ** 2
-    )
+def demo_inputs() -> tuple[dict[str, Any], SimulateStageParams]:
+    """``simulate`` arguments and stage parameters of the demo (default config)."""
+    config, _ = load_config(FACE.config_model(), [FACE.default_config], dataset_overrides("demo"))
+    needed = FACE.upstream("simulate")[:-1]
+    with rich_progress() as progress:
+        if FACE.prepare is not None:
+            FACE.prepare(config, progress)
+        store = StageStore(config.dataset.store_path)  # type: ignore[attr-defined]
+        plan = [e for e in make_plan(FACE, config, store) if e.stage in needed]
+        if any(e.action == "run" for e in plan):
+            print("computing the demo's " + ", ".join(e.stage for e in plan if e.action == "run"))
+        execute_plan_locally(FACE, config, plan, progress)
+    key = {e.stage: e.key for e in plan}
+    args = simulate_inputs(*(store.open(s, key[s]) for s in ("align", "tetra", "materials")),
+                           config.simulate.drive)  # type: ignore[attr-defined]  # fmt: skip
+    del args["skin"], args["driven_names"]
+    return args, config.simulate  # type: ignore[attr-defined]
 
 
 def time_steps(model, pres, dt, solver, n_steps):
@@ -79,22 +66,19 @@ def time_steps(model, pres, dt, solver, n_steps):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--edge", type=float, default=0.0053, help="fTetWild edge length, m")
-    ap.add_argument("--steps", type=int, default=1000, help="Newmark steps for the default run")
-    ap.add_argument("--baseline-steps", type=int, default=100, help="steps per baseline run")
+    ap.add_argument("--baseline-steps", type=int, default=100, help="steps per solver row")
     args = ap.parse_args()
-    dt, frame_dt = 1e-3, 1.0 / 30.0
 
-    t0 = time.perf_counter()
-    nodes, tets, depth = face_slab(args.edge)
-    fixed, driven = boundary(nodes, depth)
+    sim, params = demo_inputs()
+    nodes, tets, mat = sim["nodes"], sim["tets"], sim["materials"]
+    driven, fixed, traj = sim["driven_idx"], sim["fixed_idx"], sim["driven_traj"]
     print(
-        f"mesh: {len(nodes)} nodes, {len(tets)} tets, {3 * len(nodes)} DOF "
-        f"({len(fixed)} fixed, {len(driven)} driven nodes); "
-        f"meshing {time.perf_counter() - t0:.1f} s"
+        f"demo mesh: {len(nodes)} nodes, {len(tets)} tets, {3 * len(nodes)} DOF "
+        f"({len(fixed)} fixed, {len(driven)} driven nodes); {len(traj)} frames at "
+        f"{1 / sim['frame_dt']:.0f} fps"
     )
-    mat = TetMaterials.uniform(len(tets))
     pres = (3 * np.concatenate([driven, fixed])[:, None] + np.arange(3)).ravel()
+    dt = params.dt
 
     all_threads = numba.get_num_threads()
     print(f"\n{'config':34s} {'assembly s':>10s} {'factor s':>9s} {'ms/step':>8s} {'RTF':>6s}")
@@ -112,18 +96,16 @@ def main() -> None:
                 f"{name:34s} {t_asm:10.2f} {t_fac:9.2f} {1e3 * per_step:8.2f} {dt / per_step:6.2f}"
             )
 
-    params = SimulateParams(dt=dt)
-    n_frames = int(np.ceil(args.steps / np.ceil(frame_dt / dt))) + 1
-    traj = trajectories(n_frames, len(driven), frame_dt)
-    res = simulate(nodes, tets, mat, driven, traj, frame_dt, fixed, params)
-    n_steps = (n_frames - 1) * res.n_substeps
+    res = simulate(**sim, params=params)
+    n_steps = (len(traj) - 1) * res.n_substeps
     tm = res.timings
+    per_step = tm["stepping"] / n_steps
     print(
-        f"\ndefault simulate() (anp, consistent mass, auto solver): {n_steps} steps of "
-        f"{res.dt * 1e3:.3f} ms in {tm['stepping']:.2f} s stepping "
-        f"({1e3 * tm['stepping'] / n_steps:.2f} ms/step incl. per-frame energies, stress, "
-        f"inversion check; RTF {res.dt * n_steps / tm['stepping']:.2f}); assembly "
-        f"{tm['assembly']:.2f} s, factorisation {tm['factorization']:.2f} s"
+        f"\ndemo simulate stage (default: anp, consistent mass, auto solver): {n_steps} steps of "
+        f"{res.dt * 1e3:.3f} ms in {tm['stepping']:.2f} s = {1e3 * per_step:.2f} ms/step incl. "
+        f"per-frame energies, stress, inversion check; 1,000 steps in {1e3 * per_step:.2f} s "
+        f"(target < 10 s); RTF {res.dt / per_step:.2f}; assembly {tm['assembly']:.2f} s, "
+        f"factorisation {tm['factorization']:.2f} s"
     )
     print(
         f"  max |d| {np.abs(res.displacements).max() * 1e3:.2f} mm, max von Mises "
@@ -131,16 +113,8 @@ def main() -> None:
     )
 
     n_cor = 3
-    res_c = simulate(
-        nodes,
-        tets,
-        mat,
-        driven,
-        traj[: n_cor + 1],
-        frame_dt,
-        fixed,
-        SimulateParams(dt=dt, corotational=True),
-    )
+    cor = params.model_copy(update={"corotational": True})
+    res_c = simulate(**{**sim, "driven_traj": traj[: n_cor + 1]}, params=cor)
     steps_c = n_cor * res_c.n_substeps
     print(
         f"corotational: {1e3 * res_c.timings['stepping'] / steps_c:.1f} ms/step over {steps_c} "

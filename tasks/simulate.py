@@ -6,6 +6,8 @@ nodes are fixed, all others are free (SPEC eq 4.37).  Outputs at the capture fra
 
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import ConfigDict, Field, field_validator
 
 from physanim.face.landmarks import FEATURE_POINTS
@@ -35,38 +37,55 @@ class SimulateStageParams(SimulateParams):
         return v
 
 
+def simulate_inputs(aligned: Any, mesh: Any, mats: Any, drive: list[str]) -> dict[str, Any]:
+    """Arguments of ``physanim.fem.simulate`` from the align, tetra and materials outputs.
+
+    Returns nodes, tets, materials, driven_idx (first tracked point per node), driven_traj
+    (T, n_d, 3) m, frame_dt s, fixed_idx (bone-side nodes not driven), plus ``skin`` (N,)
+    bool and ``driven_names`` (n_d,) for the stage's outputs.
+    """
+    import numpy as np
+
+    from physanim.fem.materials import TetMaterials
+
+    motion = aligned["motion"][...].astype(np.float64)  # (T, V, 3) scan frame
+    names = list(aligned.attrs["landmark_names"])
+    missing = [n for n in drive if n not in names]
+    if missing:
+        raise ValueError(f"simulate.drive: {missing} were not tracked (tracked: {names})")
+    rows = np.array([names.index(n) for n in drive])
+    lm_vertices = aligned["landmark_vertices"][...][rows]
+    nodes, tets = mesh["nodes"][...], mesh["tets"][...]
+    driven, first = np.unique(mesh["landmark_node"][...][rows], return_index=True)
+    return {
+        "nodes": nodes,
+        "tets": tets,
+        "materials": TetMaterials(*(mats[k][...] for k in ("E", "nu", "eta", "rho"))),
+        "driven_idx": driven,
+        "driven_traj": motion[:, lm_vertices[first]] - motion[:1, lm_vertices[first]],
+        "frame_dt": 1.0 / float(aligned.attrs["fps"]),
+        "fixed_idx": np.nonzero(mesh["bone"][...] & ~np.isin(np.arange(len(nodes)), driven))[0],
+        "skin": mesh["skin"][...],
+        "driven_names": [drive[i] for i in first],
+    }
+
+
 def compute(ctx: StageContext) -> None:
     """displacements (T,n,3) float32 m, skin displacements, energies (T,) J, von Mises (T,) Pa."""
     import numpy as np
 
-    from physanim.fem.materials import TetMaterials
     from physanim.fem.simulate import simulate
 
     params: SimulateStageParams = ctx.params  # type: ignore[assignment]
-    aligned, mesh, mats = ctx.input("align"), ctx.input("tetra"), ctx.input("materials")
-    motion = aligned["motion"][...].astype(np.float64)  # (T, V, 3) scan frame
-    names = list(aligned.attrs["landmark_names"])
-    missing = [n for n in params.drive if n not in names]
-    if missing:
-        raise ValueError(f"simulate.drive: {missing} were not tracked (tracked: {names})")
-    rows = np.array([names.index(n) for n in params.drive])
-    lm_vertices = aligned["landmark_vertices"][...][rows]
-    nodes, tets = mesh["nodes"][...], mesh["tets"][...]
-    driven, first = np.unique(mesh["landmark_node"][...][rows], return_index=True)
-    traj = motion[:, lm_vertices[first]] - motion[:1, lm_vertices[first]]
-    skin = mesh["skin"][...]
-    fixed = np.nonzero(mesh["bone"][...] & ~np.isin(np.arange(len(nodes)), driven))[0]
-    materials = TetMaterials(*(mats[k][...] for k in ("E", "nu", "eta", "rho")))
-    fps = float(aligned.attrs["fps"])
-    result = simulate(
-        nodes, tets, materials, driven, traj, 1.0 / fps, fixed, params,
-        progress=ctx.progress("simulate"),
-    )  # fmt: skip
+    args = simulate_inputs(ctx.input("align"), ctx.input("tetra"), ctx.input("materials"),
+                           params.drive)  # fmt: skip
+    skin, driven_names = args.pop("skin"), args.pop("driven_names")
+    result = simulate(**args, params=params, progress=ctx.progress("simulate"))
     ctx.write_record(result)
     ctx.write("skin_nodes", np.nonzero(skin)[0])
     ctx.write("skin_displacements", result.displacements[:, skin])
-    ctx.write("driven_nodes", driven)
-    ctx.out.attrs["driven_landmarks"] = [params.drive[i] for i in first]
+    ctx.write("driven_nodes", args["driven_idx"])
+    ctx.out.attrs["driven_landmarks"] = driven_names
     ctx.summary.update(
         frames=len(result.displacements),
         dt_s=result.dt,

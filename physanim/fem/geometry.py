@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 
 def validate_mesh(nodes: np.ndarray, tets: np.ndarray) -> None:
@@ -23,9 +24,23 @@ def validate_mesh(nodes: np.ndarray, tets: np.ndarray) -> None:
 
 def signed_volumes(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """Signed tet volumes (M,) in m^3; positive for positively oriented tets."""
-    x = nodes[tets]
-    edges = x[:, 1:] - x[:, :1]  # (M, 3, 3), rows are edges from node 0
-    return np.linalg.det(edges) / 6.0
+    out = np.empty(len(tets))
+    _signed_volumes(np.ascontiguousarray(nodes, dtype=np.float64), np.ascontiguousarray(tets), out)
+    return out
+
+
+# compiled: it runs once per output frame, where the numpy version (gather nodes[tets], then
+# np.linalg.det, an LU per tet) took ~5 ms on the demo mesh
+@njit(cache=True)
+def _signed_volumes(nodes, tets, out):
+    for e in range(tets.shape[0]):
+        i, j, k, m = tets[e, 0], tets[e, 1], tets[e, 2], tets[e, 3]
+        x, y, z = nodes[i, 0], nodes[i, 1], nodes[i, 2]
+        a0, a1, a2 = nodes[j, 0] - x, nodes[j, 1] - y, nodes[j, 2] - z
+        b0, b1, b2 = nodes[k, 0] - x, nodes[k, 1] - y, nodes[k, 2] - z
+        c0, c1, c2 = nodes[m, 0] - x, nodes[m, 1] - y, nodes[m, 2] - z
+        det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
+        out[e] = det / 6.0
 
 
 def shape_gradients(nodes: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit, prange
 
 from physanim.fem.assembly import (
     assemble,
@@ -23,6 +24,27 @@ from physanim.fem.materials import TetMaterials
 from physanim.fem.params import SimulateParams
 
 _M_VOIGT = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+
+
+# one pass per tet (strain, deviator, invariant): the numpy version made ~10 temporaries of
+# (M, 6) and took ~5 ms per frame on the demo mesh
+@njit(cache=True, parallel=True)
+def _von_mises(B, d_elem, mu, out):
+    """out (M,) = sqrt(3/2 s:s), s = 2 mu dev(eps), eps = B d_elem (Voigt, engineering shear)."""
+    for e in prange(B.shape[0]):
+        e0 = e1 = e2 = e3 = e4 = e5 = 0.0
+        for j in range(12):
+            dj = d_elem[e, j]
+            e0 += B[e, 0, j] * dj
+            e1 += B[e, 1, j] * dj
+            e2 += B[e, 2, j] * dj
+            e3 += B[e, 3, j] * dj
+            e4 += B[e, 4, j] * dj
+            e5 += B[e, 5, j] * dj
+        mean = (e0 + e1 + e2) / 3.0
+        normal = (e0 - mean) ** 2 + (e1 - mean) ** 2 + (e2 - mean) ** 2
+        shear = e3**2 + e4**2 + e5**2
+        out[e] = mu[e] * np.sqrt(6.0 * normal + 3.0 * shear)
 
 
 @dataclass
@@ -65,11 +87,9 @@ class FemModel:
 
     def von_mises(self, d_elem: np.ndarray) -> np.ndarray:
         """Elastic von Mises stress (M,) in Pa from element displacements (M, 12) in m."""
-        eps = self.element_strains(d_elem)
-        dev = eps[:, :3] - eps[:, :3].mean(axis=1, keepdims=True)
-        s_n = 2.0 * self.mu[:, None] * dev
-        tau = self.mu[:, None] * eps[:, 3:]
-        return np.sqrt(1.5 * (s_n**2).sum(axis=1) + 3.0 * (tau**2).sum(axis=1))
+        out = np.empty(len(self.tets))
+        _von_mises(self.B, np.ascontiguousarray(d_elem, dtype=np.float64), self.mu, out)
+        return out
 
     @property
     def split(self) -> tuple[sp.csr_matrix, sp.csr_matrix, np.ndarray] | None:

@@ -25,6 +25,8 @@ from numba import njit, prange
 
 import physanim.fem.numba_threads  # noqa: F401  (threading layer, before compiling)
 
+U0, U1 = np.uint64(0), np.uint64(1)
+
 
 @njit(cache=True)
 def _subtree_sizes(parent: np.ndarray) -> np.ndarray:
@@ -147,54 +149,75 @@ def _pack_blocks(indptr, indices, data, starts, widths, roff, boff, toff, rows, 
                 vals[boff[s] + b * m + r] = data[q + r]
 
 
+# The sweeps index with unsigned integers (all offsets are uint64): a signed index makes numba
+# emit a negative-index wraparound select on every load, which kept LLVM from vectorising the
+# block loops (measured 1.6x slower block products).
+
+
 @njit(cache=True)
 def _unit_lower_solve(y, c0, w, tri, off):
     """y[c0:c0+w] <- T^-1 y[c0:c0+w] for the supernode's unit lower triangle T (at tri[off:])."""
     for b in range(w):
         yb = y[c0 + b]
-        for a in range(b + 1, w):
-            y[c0 + a] -= tri[off + b * w + a] * yb
+        col = off + b * w
+        for a in range(b + U1, w):
+            y[c0 + a] -= tri[col + a] * yb
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def _unit_upper_solve(x, c0, w, tri, off):
     """x[c0:c0+w] <- T^-T x[c0:c0+w] (the transpose of ``_unit_lower_solve``)."""
-    for b in range(w - 2, -1, -1):
+    for k in range(U1, w):
+        b = w - U1 - k
+        col = off + b * w
         acc = x[c0 + b]
-        for a in range(b + 1, w):
-            acc -= tri[off + b * w + a] * x[c0 + a]
+        for a in range(b + U1, w):
+            acc -= tri[col + a] * x[c0 + a]
         x[c0 + b] = acc
+
+
+@njit(cache=True, fastmath=True)
+def _block_product(vals, p, m, lo, hi, y, c0, w, tmp):
+    """tmp[lo:hi] = V[lo:hi] @ y[c0:c0+w], V the column-major (m, w) block at vals[p:]."""
+    for r in range(lo, hi):
+        tmp[r] = 0.0
+    for b in range(w):  # column by column: contiguous, vectorised
+        yb = y[c0 + b]
+        col = p + b * m
+        for r in range(lo, hi):
+            tmp[r] += vals[col + r] * yb
+
+
+@njit(cache=True, fastmath=True)
+def _block_transposed_product(vals, p, m, b0, b1, tmp, y, dinv, x, c0):
+    """x[c0+b] = y[c0+b] dinv[c0+b] - V[:, b] . tmp[:m] for the block columns b in [b0, b1)."""
+    for b in range(b0, b1):
+        col = p + b * m
+        acc = 0.0
+        for r in range(m):
+            acc += vals[col + r] * tmp[r]
+        x[c0 + b] = y[c0 + b] * dinv[c0 + b] - acc
 
 
 @njit(cache=True, fastmath=True)
 def _forward_block(s, y, starts, widths, roff, rows, boff, vals, toff, tri, n_own, buf, tmp):
-    c0, w = starts[s], widths[s]
+    c0, w, r0 = starts[s], widths[s], roff[s]
+    m = roff[s + 1] - r0
     _unit_lower_solve(y, c0, w, tri, toff[s])
-    m = roff[s + 1] - roff[s]
-    tmp[:m] = 0.0  # column by column over the block: contiguous, vectorised
-    for b in range(w):
-        yb = y[c0 + b]
-        p = boff[s] + b * m
-        for r in range(m):
-            tmp[r] += vals[p + r] * yb
+    _block_product(vals, boff[s], m, U0, m, y, c0, w, tmp)
     for r in range(n_own[s]):
-        y[rows[roff[s] + r]] -= tmp[r]
+        y[rows[r0 + r]] -= tmp[r]
     for r in range(n_own[s], m):
-        buf[rows[roff[s] + r]] -= tmp[r]
+        buf[rows[r0 + r]] -= tmp[r]
 
 
 @njit(cache=True, fastmath=True)
 def _backward_block(s, y, x, dinv, starts, widths, roff, rows, boff, vals, toff, tri, tmp):
-    c0, w = starts[s], widths[s]
-    m = roff[s + 1] - roff[s]
+    c0, w, r0 = starts[s], widths[s], roff[s]
+    m = roff[s + 1] - r0
     for r in range(m):
-        tmp[r] = x[rows[roff[s] + r]]
-    for b in range(w):
-        p = boff[s] + b * m
-        acc = y[c0 + b] * dinv[c0 + b]
-        for r in range(m):
-            acc -= vals[p + r] * tmp[r]
-        x[c0 + b] = acc
+        tmp[r] = x[rows[r0 + r]]
+    _block_transposed_product(vals, boff[s], m, U0, w, tmp, y, dinv, x, c0)
     _unit_upper_solve(x, c0, w, tri, toff[s])
 
 
@@ -213,32 +236,26 @@ def _solve(b, perm, dinv, starts, widths, roff, rows, boff, vals, toff, tri, n_o
         for i in top_rows:
             y[i] += buf[t, i]
             buf[t, i] = 0.0
+    nb = np.uint64(n_bins)
     for q in range(top_sn.size):  # top supernodes: one at a time, rows split over threads
         s = top_sn[q]
-        c0, w, m, tm = starts[s], widths[s], roff[s + 1] - roff[s], tmp[0]
+        c0, w, r0, tm = starts[s], widths[s], roff[s], tmp[0]
+        m = roff[s + 1] - r0
         _unit_lower_solve(y, c0, w, tri, toff[s])
         for t in prange(n_bins):
-            lo, hi = (m * t) // n_bins, (m * (t + 1)) // n_bins
-            tm[lo:hi] = 0.0
-            for j in range(w):
-                yj = y[c0 + j]
-                p = boff[s] + j * m
-                for r in range(lo, hi):
-                    tm[r] += vals[p + r] * yj
+            lo, hi = (m * np.uint64(t)) // nb, (m * np.uint64(t + 1)) // nb
+            _block_product(vals, boff[s], m, lo, hi, y, c0, w, tm)
             for r in range(lo, hi):
-                y[rows[roff[s] + r]] -= tm[r]
+                y[rows[r0 + r]] -= tm[r]
     for q in range(top_sn.size - 1, -1, -1):  # columns split over threads
         s = top_sn[q]
-        c0, w, m, tm = starts[s], widths[s], roff[s + 1] - roff[s], tmp[0]
+        c0, w, r0, tm = starts[s], widths[s], roff[s], tmp[0]
+        m = roff[s + 1] - r0
         for r in range(m):
-            tm[r] = x[rows[roff[s] + r]]
+            tm[r] = x[rows[r0 + r]]
         for t in prange(n_bins):
-            for j in range((w * t) // n_bins, (w * (t + 1)) // n_bins):
-                p = boff[s] + j * m
-                acc = y[c0 + j] * dinv[c0 + j]
-                for r in range(m):
-                    acc -= vals[p + r] * tm[r]
-                x[c0 + j] = acc
+            b0, b1 = (w * np.uint64(t)) // nb, (w * np.uint64(t + 1)) // nb
+            _block_transposed_product(vals, boff[s], m, b0, b1, tm, y, dinv, x, c0)
         _unit_upper_solve(x, c0, w, tri, toff[s])
     for t in prange(n_bins):
         for q in range(bin_ptr[t + 1] - 1, bin_ptr[t] - 1, -1):
@@ -309,11 +326,13 @@ class ParallelLDL:
         self.tri = np.zeros(toff[-1])
         _pack_blocks(indptr, indices, Ls.data, starts, widths, roff, boff, toff, self.rows,
                      self.vals, self.tri)  # fmt: skip
-        self.starts, self.widths, self.roff, self.boff, self.toff = starts, widths, roff, boff, toff
+        u64 = lambda a: np.asarray(a, np.uint64)  # noqa: E731
+        self.starts, self.widths = u64(starts), u64(widths)
+        self.roff, self.boff, self.toff = u64(roff), u64(boff), u64(toff)
 
         # supernodes per bin (its subtrees are contiguous column ranges in postorder) and top
         sn_of = np.repeat(np.arange(starts.size), widths)
-        self.n_own = m.copy()  # block rows inside the supernode's own subtree (top: all)
+        self.n_own = m.astype(np.uint64)  # block rows inside its own subtree (top: all)
         bin_sn = []
         for roots in bin_roots:
             ids = []

@@ -17,16 +17,20 @@ from numba import njit, prange
 
 import physanim.fem.numba_threads  # noqa: F401  (threading layer, before compiling)
 
+# unsigned offsets and indices (uint64 / uint32): numba adds a negative-index wraparound
+# select to every load through a signed index
+_U1, _U2 = np.uint64(1), np.uint64(2)
+
 
 @njit(cache=True, inline="always")
 def _row_dot(indptr, indices, data, x, i):
     acc0 = 0.0
     acc1 = 0.0
     k, end = indptr[i], indptr[i + 1]
-    while k + 1 < end:
+    while k + _U1 < end:
         acc0 += data[k] * x[indices[k]]
-        acc1 += data[k + 1] * x[indices[k + 1]]
-        k += 2
+        acc1 += data[k + _U1] * x[indices[k + _U1]]
+        k += _U2
     if k < end:
         acc0 += data[k] * x[indices[k]]
     return acc0 + acc1
@@ -61,31 +65,27 @@ def _quadratic_form(indptr, indices, data, x, bounds):
     return parts.sum()
 
 
-def _row_bounds(A: sp.csr_matrix, n_threads: int | None) -> np.ndarray:
-    """Row ranges with equal stored entries, one per thread: (k + 1,) int64."""
-    k = max(1, int(n_threads or numba.get_num_threads()))
-    cuts = np.searchsorted(A.indptr, A.nnz * np.arange(1, k) / k)
-    return np.r_[0, cuts, A.shape[0]].astype(np.int64)
+def _csr_arrays(A: sp.spmatrix, n_threads: int | None) -> tuple[np.ndarray, ...]:
+    """indptr (uint64), indices (uint32), data and per-thread row bounds (k + 1,) of A.
 
-
-def _compact(A: sp.spmatrix) -> sp.csr_matrix:
+    Duplicates summed, stored zeros dropped (e.g. the consistent mass stores 3x3 blocks that
+    are m_ij I); the row ranges hold equal numbers of entries.
+    """
     A = sp.csr_matrix(A, copy=True)
     A.sum_duplicates()
-    A.eliminate_zeros()  # e.g. the consistent mass stores 3x3 blocks that are m_ij I
-    # unsigned indices spare numba's negative-index wraparound on every load
-    A.indices = A.indices.astype(np.uint32)
-    A.indptr = A.indptr.astype(np.int64)
-    return A
+    A.eliminate_zeros()
+    k = max(1, int(n_threads or numba.get_num_threads()))
+    cuts = np.searchsorted(A.indptr, A.nnz * np.arange(1, k) / k)
+    bounds = np.r_[0, cuts, A.shape[0]].astype(np.int64)
+    return A.indptr.astype(np.uint64), A.indices.astype(np.uint32), A.data, bounds
 
 
 class ParallelCSR:
     """y = A x for a fixed sparse A (n, m) on ``n_threads`` threads (numba's by default)."""
 
     def __init__(self, A: sp.spmatrix, n_threads: int | None = None) -> None:
-        A = _compact(A)
         self.shape = A.shape
-        self.indptr, self.indices, self.data = A.indptr, A.indices, A.data
-        self.bounds = _row_bounds(A, n_threads)
+        self.indptr, self.indices, self.data, self.bounds = _csr_arrays(A, n_threads)
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
         """A @ x for x (m,) float64; returns (n,)."""
@@ -104,10 +104,9 @@ class SymmetricQuadraticForm:
         A = sp.csr_matrix(A)
         if A.shape[0] != A.shape[1]:
             raise ValueError(f"quadratic form needs a square matrix, got {A.shape}")
-        U = _compact(sp.triu(A, 1, format="csr") * 2.0 + sp.diags(A.diagonal()))
+        U = sp.triu(A, 1, format="csr") * 2.0 + sp.diags(A.diagonal())
         self.n = A.shape[0]
-        self.indptr, self.indices, self.data = U.indptr, U.indices, U.data
-        self.bounds = _row_bounds(U, n_threads)
+        self.indptr, self.indices, self.data, self.bounds = _csr_arrays(U, n_threads)
 
     def __call__(self, x: np.ndarray) -> float:
         """x^T A x for x (n,) float64."""

@@ -21,6 +21,7 @@ from physanim.fem.interp import catmull_rom
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel, build_model
 from physanim.fem.newmark import Newmark, State
+from physanim.fem.parallel_spmv import SymmetricQuadraticForm
 from physanim.fem.params import SimulateParams
 from physanim.fem.statics import solve_static
 
@@ -145,16 +146,19 @@ def simulate(
     inv_count = np.zeros(n_frames, dtype=np.int64)
     inverted: set[int] = set()
 
+    kinetic_form = SymmetricQuadraticForm(model.M)
+    strain_form = None if params.corotational else SymmetricQuadraticForm(model.K)
+
     def record(k: int) -> None:
         d = state.d
         out[k] = d.reshape(-1, 3)
-        kin[k] = 0.5 * float(state.v @ (model.M @ state.v))
+        kin[k] = 0.5 * kinetic_form(state.v)
         if params.corotational:
             u_loc = local_displacements(model, d, rotations(model, d))
             pot[k] = strain_energy(model, u_loc)
         else:
             u_loc = d[model.dofs]
-            pot[k] = 0.5 * float(d @ (model.K @ d))
+            pot[k] = 0.5 * strain_form(d)
         vm[k] = model.von_mises(u_loc).max()
         bad = np.flatnonzero(signed_volumes(model.nodes + d.reshape(-1, 3), model.tets) <= 0)
         inv_count[k] = bad.size

@@ -110,6 +110,14 @@ class Pipeline:
                 out.add(s.name)
         return [s.name for s in self.stages if s.name in out]
 
+    def upstream(self, name: str) -> list[str]:
+        """``name`` and every stage it depends on, in topological order."""
+        out = {name}
+        for s in reversed(self.stages):
+            if s.name in out:
+                out.update(s.upstream)
+        return [s.name for s in self.stages if s.name in out]
+
     def config_model(self) -> type[BaseModel]:
         """Pydantic model of this pipeline's config: ``dataset`` plus one section per stage."""
         sections: dict[str, Any] = {"dataset": (DatasetParams, DatasetParams())}

@@ -154,3 +154,12 @@ def test_model_sweep_shares_upstream_stages(demo_run, tmp_path: Path) -> None:
         "ingest": 1, "track": 1, "fit": 1, "align": 1, "tetra": 1,
         "materials": 3, "simulate": 3, "evaluate": 3, "render": 3,
     }  # fmt: skip
+
+
+def test_dag_upstream_and_downstream_closures() -> None:
+    assert FACE.upstream("simulate") == [
+        "ingest", "track", "fit", "align", "tetra", "materials", "simulate"
+    ]  # fmt: skip
+    assert FACE.upstream("tetra") == ["ingest", "track", "fit", "align", "tetra"]
+    assert FACE.downstream("materials") == ["materials", "simulate", "evaluate", "render"]
+    assert FACE.upstream("ingest") == ["ingest"]

@@ -29,9 +29,23 @@ def test_patch_constant_strain_is_exact(formulation):
     bnd = _dofs(np.flatnonzero(~inner))
     d = solve_static(model.K, bnd, exact.ravel()[bnd]).reshape(-1, 3)
     np.testing.assert_allclose(d[inner], exact[inner], rtol=0, atol=1e-12)
-    # constant strain -> the same von Mises stress in every tet
+    # constant strain -> in every tet the von Mises stress of s = 2 mu dev(eps)
+    eps = 0.5 * (grad + grad.T)
+    dev = eps - np.trace(eps) / 3 * np.eye(3)
+    mu = 1e5 / (2 * 1.45)
     vm = model.von_mises(d.ravel()[model.dofs])
-    np.testing.assert_allclose(vm, vm[0], rtol=1e-9)
+    np.testing.assert_allclose(vm, np.sqrt(1.5 * ((2 * mu * dev) ** 2).sum()), rtol=1e-9)
+
+
+def test_signed_volumes_of_known_tets():
+    unit = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(3, 3))  # affine map scales volumes by det A (sign flips with it)
+    nodes = np.vstack([unit * 0.01, unit @ A.T + 1.0])
+    tets = np.array([[0, 1, 2, 3], [0, 2, 1, 3], [4, 5, 6, 7]])
+    np.testing.assert_allclose(
+        signed_volumes(nodes, tets), [1e-6 / 6, -1e-6 / 6, np.linalg.det(A) / 6], rtol=1e-12
+    )
 
 
 def _inner_pressure_load(nodes, tets, rtz, a, p):
