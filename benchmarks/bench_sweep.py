@@ -82,6 +82,10 @@ def main() -> None:
         f"({len(dask.results)} runs)  ratio to 1 worker {dask.seconds / one.seconds:.2f}, "
         f"to serial {dask.seconds / serial.seconds:.2f}"
     )
+    print("  stage seconds summed over variants (serial / 1 worker / 2 workers):")
+    for stage in dict.fromkeys(r.stage for r in serial.results):
+        sums = [sum(r.seconds for r in o.results if r.stage == stage) for o in (serial, one, dask)]
+        print(f"    {stage:10s} " + " / ".join(f"{x:6.1f}" for x in sums))
 
 
 if __name__ == "__main__":
