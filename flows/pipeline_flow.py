@@ -10,6 +10,7 @@ from prefect import flow, task
 from prefect.cache_policies import NONE
 from pydantic import BaseModel
 
+from physanim.native import load_in_main_thread
 from physanim.pipeline import (
     Pipeline,
     PlanEntry,
@@ -35,6 +36,8 @@ def pipeline_flow(
     progress: ProgressFactory | None = None,
 ) -> list[StageResult]:
     """Submit every planned stage as a task, each waiting for its upstream stages' tasks."""
+    if any(e.action == "run" for e in entries):
+        load_in_main_thread()  # before the task threads import them (see physanim.native)
     futures = {}
     for e in entries:
         if e.action != "run":
