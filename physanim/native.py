@@ -20,4 +20,5 @@ def load_in_main_thread() -> bool:
         return False  # too late to help here; the stages load them where they need them
     import open3d  # noqa: F401  (loaded with pymeshlab in the measurements above)
     import pymeshlab  # noqa: F401
+
     return True
