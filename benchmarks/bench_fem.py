@@ -43,9 +43,8 @@ def demo_inputs() -> tuple[dict[str, Any], SimulateStageParams]:
             print("computing the demo's " + ", ".join(e.stage for e in plan if e.action == "run"))
         execute_plan_locally(FACE, config, plan, progress)
     key = {e.stage: e.key for e in plan}
-    args = simulate_inputs(*(store.open(s, key[s]) for s in ("align", "tetra", "materials")),
-                           config.simulate.drive)  # type: ignore[attr-defined]  # fmt: skip
-    del args["skin"], args["driven_names"]
+    groups = (store.open(s, key[s]) for s in ("align", "tetra", "materials"))
+    args, _, _ = simulate_inputs(*groups, config.simulate.drive)  # type: ignore[attr-defined]
     return args, config.simulate  # type: ignore[attr-defined]
 
 

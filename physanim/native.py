@@ -1,12 +1,12 @@
 """Native libraries that the main thread must load before stage code runs in worker threads.
 
-Measured here (pymeshlab 2025.7, open3d 0.20, scipy 1.16): a process in which pymeshlab is
-first imported by a thread other than the main one, together with Open3D (or scipy.sparse and
-Open3D), aborts at exit with glibc's "malloc_consolidate(): unaligned fastbin chunk detected"
-(status 134, or a Dask worker killed by signal 6). Loaded by the main thread first, the same
-imports and stages exit cleanly. Prefect runs stages in worker threads and Dask in executor
-threads, so the flows call ``load_in_main_thread`` first, and Dask workers preload
-``flows.worker_preload``.
+Measured here (pymeshlab 2025.7, open3d 0.20, scipy 1.17): a process in which a thread other
+than the main one imports open3d then pymeshlab, or scipy.sparse, pymeshlab then open3d, aborts
+at exit with glibc's "malloc_consolidate(): unaligned fastbin chunk detected" (status 134, or a
+Dask worker killed by signal 6). With pymeshlab loaded by the main thread first, the same
+imports of every stage module in a thread exit cleanly (Open3D alone first does not help).
+Prefect runs stages in worker threads and Dask in executor threads, so the flows call
+``load_in_main_thread`` first, and Dask workers preload ``flows.worker_preload``.
 """
 
 from __future__ import annotations

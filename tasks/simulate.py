@@ -37,12 +37,14 @@ class SimulateStageParams(SimulateParams):
         return v
 
 
-def simulate_inputs(aligned: Any, mesh: Any, mats: Any, drive: list[str]) -> dict[str, Any]:
+def simulate_inputs(
+    aligned: Any, mesh: Any, mats: Any, drive: list[str]
+) -> tuple[dict[str, Any], Any, list[str]]:
     """Arguments of ``physanim.fem.simulate`` from the align, tetra and materials outputs.
 
-    Returns nodes, tets, materials, driven_idx (first tracked point per node), driven_traj
-    (T, n_d, 3) m, frame_dt s, fixed_idx (bone-side nodes not driven), plus ``skin`` (N,)
-    bool and ``driven_names`` (n_d,) for the stage's outputs.
+    Returns (keyword arguments: nodes, tets, materials, driven_idx (first tracked point per
+    node), driven_traj (T, n_d, 3) m, frame_dt s, fixed_idx (bone-side nodes not driven);
+    skin (N,) bool; names of the n_d driving feature points).
     """
     import numpy as np
 
@@ -57,7 +59,7 @@ def simulate_inputs(aligned: Any, mesh: Any, mats: Any, drive: list[str]) -> dic
     lm_vertices = aligned["landmark_vertices"][...][rows]
     nodes, tets = mesh["nodes"][...], mesh["tets"][...]
     driven, first = np.unique(mesh["landmark_node"][...][rows], return_index=True)
-    return {
+    args = {
         "nodes": nodes,
         "tets": tets,
         "materials": TetMaterials(*(mats[k][...] for k in ("E", "nu", "eta", "rho"))),
@@ -65,9 +67,8 @@ def simulate_inputs(aligned: Any, mesh: Any, mats: Any, drive: list[str]) -> dic
         "driven_traj": motion[:, lm_vertices[first]] - motion[:1, lm_vertices[first]],
         "frame_dt": 1.0 / float(aligned.attrs["fps"]),
         "fixed_idx": np.nonzero(mesh["bone"][...] & ~np.isin(np.arange(len(nodes)), driven))[0],
-        "skin": mesh["skin"][...],
-        "driven_names": [drive[i] for i in first],
     }
+    return args, mesh["skin"][...], [drive[i] for i in first]
 
 
 def compute(ctx: StageContext) -> None:
@@ -77,9 +78,9 @@ def compute(ctx: StageContext) -> None:
     from physanim.fem.simulate import simulate
 
     params: SimulateStageParams = ctx.params  # type: ignore[assignment]
-    args = simulate_inputs(ctx.input("align"), ctx.input("tetra"), ctx.input("materials"),
-                           params.drive)  # fmt: skip
-    skin, driven_names = args.pop("skin"), args.pop("driven_names")
+    args, skin, driven_names = simulate_inputs(
+        ctx.input("align"), ctx.input("tetra"), ctx.input("materials"), params.drive
+    )
     result = simulate(**args, params=params, progress=ctx.progress("simulate"))
     ctx.write_record(result)
     ctx.write("skin_nodes", np.nonzero(skin)[0])

@@ -81,10 +81,6 @@ class FemModel:
     def n_dofs(self) -> int:
         return 3 * len(self.nodes)
 
-    def element_strains(self, d: np.ndarray) -> np.ndarray:
-        """Small-strain Voigt strains (M, 6) of element displacements ``d`` (M, 12) in m."""
-        return np.einsum("mij,mj->mi", self.B, d)
-
     def von_mises(self, d_elem: np.ndarray) -> np.ndarray:
         """Elastic von Mises stress (M,) in Pa from element displacements (M, 12) in m."""
         out = np.empty(len(self.tets))
