@@ -41,7 +41,7 @@ def main() -> None:
         ensure_demo(cfg)
         store = StageStore(cfg.dataset.store_path)
         plan = make_plan(FACE, cfg, store, only=None)
-        upstream = [e for e in plan if e.stage in ("ingest", "track", "fit", "align", "tetra")]
+        upstream = [e for e in plan if e.stage in FACE.upstream("tetra")]
         t0 = time.perf_counter()
         execute_plan_locally(FACE, cfg, upstream)
         print(f"shared stages (ingest..tetra): {time.perf_counter() - t0:.1f} s")

@@ -8,7 +8,8 @@ its factor is twice as large. The sweeps are memory-bound, so this solve (1) sto
 factor as dense column blocks of its fundamental supernodes (one row index per block row
 instead of one per entry: ~8.4 instead of 12 bytes per entry on a face mesh) and (2) splits
 the elimination tree into disjoint subtrees, one group per thread (Geist-Ng), which are
-independent in both sweeps; only the top separator is swept by one thread.
+independent in both sweeps; the top separator's supernodes follow one at a time, each split
+over the threads by rows (forward) or columns (backward).
 
 A (n, n) = P^T L D L^T P with L unit lower triangular, D diagonal (any sign), P a
 permutation; ``perm[i]`` is the original index of permuted row i.
