@@ -23,17 +23,20 @@ from flows.dags import get_pipeline
 from physanim.config import load_config
 from physanim.pipeline import Pipeline, StageResult, execute_stage, make_plan
 from physanim.pipeline.sweep import Job, Variant, load_sweep, merge_plans
+from physanim.render.sweep_report import SweepVariant, write_sweep_report
 from physanim.store import StageStore
 
 
 @dataclass(frozen=True)
 class SweepOutcome:
-    """What a sweep did: per-variant stage keys, the jobs run, wall time (s), summary file."""
+    """What a sweep did: per-variant stage keys, the jobs run, wall time (s), summary file
+    (JSON) and report (HTML)."""
 
     variants: dict[str, dict[str, str]]
     results: list[StageResult]
     seconds: float
     summary_path: Path
+    report_path: Path
 
 
 @task(cache_policy=NONE, persist_result=False)
@@ -146,31 +149,65 @@ def run_sweep(
     seconds = time.perf_counter() - t0
 
     table: dict[str, dict[str, str]] = {}
-    rows = []
+    report_variants = []
     for v in variants:
         cfg = configs[v.name]
         store = StageStore(cfg.dataset.store_path)
         plan = make_plan(pipeline, cfg, store)
         table[v.name] = {e.stage: e.key for e in plan}
-        summaries = {
-            e.stage: store.provenance(e.stage, e.key).get("summary", {})
-            for e in plan
-            if store.has(e.stage, e.key)
-        }
-        rows.append(
-            {
-                "variant": v.name,
-                "dataset": v.dataset,
-                "keys": table[v.name],
-                "summaries": summaries,
-                "overrides": list(v.overrides),
-            }
+        done = [e for e in plan if store.has(e.stage, e.key)]
+        report_variants.append(
+            SweepVariant(
+                name=v.name,
+                dataset=v.dataset,
+                configs=v.configs,
+                overrides=v.overrides,
+                keys=table[v.name],
+                summaries={
+                    e.stage: store.provenance(e.stage, e.key).get("summary", {}) for e in done
+                },
+                files={e.stage: store.files(e.stage, e.key) for e in done},
+            )
         )
-    out = Path(run_dir) / "sweeps" / Path(path).stem / "summary.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(
+    out = Path(run_dir) / "sweeps" / Path(path).stem
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(
         json.dumps(
-            {"sweep": str(path), "seconds": seconds, "variants": rows}, indent=2, default=str
+            {
+                "sweep": str(path),
+                "seconds": seconds,
+                "variants": [
+                    {
+                        "variant": v.name,
+                        "dataset": v.dataset,
+                        "keys": dict(v.keys),
+                        "summaries": dict(v.summaries),
+                        "overrides": list(v.overrides),
+                    }
+                    for v in report_variants
+                ],
+                "runs": [
+                    {
+                        "stage": r.stage,
+                        "key": r.key,
+                        "action": r.action,
+                        "seconds": r.seconds,
+                        "started": r.started,
+                        "worker": r.worker,
+                    }
+                    for r in results
+                ],  # fmt: skip
+            },
+            indent=2,
+            default=str,
         )
     )
-    return SweepOutcome(table, list(results), seconds, out)
+    report = write_sweep_report(
+        out,
+        title=f"Sweep {Path(path).stem}",
+        variants=report_variants,
+        results=list(results),
+        seconds=seconds,
+        subtitle=f"{path}: {pipeline.name} pipeline,",
+    )
+    return SweepOutcome(table, list(results), seconds, out / "summary.json", report)

@@ -352,6 +352,7 @@ def sweep(
         table.add_row(name, *(keys[s][:8] for s in stages))
     Console().print(table)
     console.print(f"summary: {outcome.summary_path}")
+    console.print(f"report: {outcome.report_path}")
 
 
 @app.command()

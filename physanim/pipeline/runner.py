@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import socket
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -14,6 +16,8 @@ from physanim.pipeline.plan import PlanEntry
 from physanim.pipeline.spec import Pipeline
 from physanim.store import StageStore
 
+_HOST = socket.gethostname()
+
 
 class StageFailed(RuntimeError):
     """A stage's compute raised; the message names the stage and the original error."""
@@ -25,13 +29,19 @@ class StageFailed(RuntimeError):
 
 @dataclass(frozen=True)
 class StageResult:
-    """Outcome of one stage in a run: ``ran`` or ``cached``, with its wall time in seconds."""
+    """Outcome of one stage in a run: ``ran`` or ``cached``, with its wall time in seconds.
+
+    ``started``: Unix time (s) the stage began; ``worker``: ``host:pid`` of the process that
+    ran it (sweep timelines).
+    """
 
     stage: str
     key: str
     action: str
     seconds: float
     summary: Mapping[str, Any]
+    started: float = 0.0
+    worker: str = ""
 
 
 def execute_stage(
@@ -49,7 +59,7 @@ def execute_stage(
     spec = pipeline.stage(entry.stage)
     dataset = config.dataset  # type: ignore[attr-defined]
     store = StageStore(dataset.store_path)
-    t0 = time.perf_counter()
+    t0, started = time.perf_counter(), time.time()
     if store.has(spec.name, entry.key):
         if not entry.forced:
             store.set_latest(spec.name, entry.key)
@@ -81,7 +91,10 @@ def execute_stage(
         if ctx.summary:
             group.attrs["summary"] = ctx.summary
     store.set_latest(spec.name, entry.key)
-    return StageResult(spec.name, entry.key, "ran", time.perf_counter() - t0, ctx.summary)
+    seconds = time.perf_counter() - t0
+    return StageResult(
+        spec.name, entry.key, "ran", seconds, ctx.summary, started, f"{_HOST}:{os.getpid()}"
+    )
 
 
 def execute_plan_locally(

@@ -27,7 +27,8 @@ margin-bottom:16px}
 video{width:100%;border-radius:6px;background:#000}
 .grid{display:grid;grid-template-columns:repeat(auto-fit,minmax(460px,1fr));gap:16px}
 figure{margin:0;background:#fff;border:1px solid #d0d7de;border-radius:8px;padding:10px}
-figure img{width:100%;height:auto;display:block}
+figure img,figure video{width:100%;height:auto;display:block}
+section.card figure{margin-bottom:10px}
 figcaption{font-size:.9em;color:#57606a;margin-top:6px}
 table{border-collapse:collapse;width:100%;font-size:.92em}
 th,td{padding:6px 10px;border-bottom:1px solid #e5e8eb;text-align:left;vertical-align:top}
@@ -130,6 +131,19 @@ def _variants(variants: Mapping[str, Mapping[str, Any]]) -> str:
     return _table(("measure", *names), rows)
 
 
+def _media(files: Sequence[tuple[str, str | Path]], out_dir: Path) -> str:
+    """Videos and images (caption, path) as HTML, links relative to ``out_dir``."""
+    parts = []
+    for caption, path in files:
+        src = _e(_rel(path, out_dir, f"file {caption!r}"))
+        if Path(path).suffix.lower() in (".mp4", ".webm"):
+            tag = f"<video controls loop muted playsinline preload='metadata' src='{src}'></video>"
+        else:
+            tag = f"<a href='{src}'><img src='{src}' alt='{_e(caption)}' loading='lazy'></a>"
+        parts.append(f"<figure>{tag}<figcaption>{_e(caption)}</figcaption></figure>")
+    return "".join(parts)
+
+
 def build_report(
     out_dir: str | Path,
     *,
@@ -139,6 +153,7 @@ def build_report(
     key_figures: Mapping[str, Any] | None = None,
     stage_table: Sequence[Mapping[str, Any]] = (),
     variants: Mapping[str, Mapping[str, Any]] | None = None,
+    galleries: Mapping[str, Sequence[tuple[str, str | Path]]] | None = None,
     subtitle: str = "",
 ) -> Path:
     """Write ``out_dir/index.html`` and return its path.
@@ -149,7 +164,8 @@ def build_report(
     with ``stage`` and optionally ``key``, ``action`` ("ran"/"cached"), ``seconds``,
     ``params`` (dict) and any further entries (e.g. ``provenance``) shown as JSON in a
     collapsible block.  ``variants``: variant -> measure -> value, shown as one column per
-    variant.
+    variant.  ``galleries``: variant -> (caption, file) videos (.mp4/.webm) and images, one
+    card per variant side by side.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -172,6 +188,12 @@ def build_report(
         parts.append(f"<h2>Key figures</h2><section class='card'>{table}</section>")
     if variants:
         parts.append(f"<h2>Variants</h2><section class='card'>{_variants(variants)}</section>")
+    if galleries:
+        cards = "".join(
+            f"<section class='card'><h3>{_e(name)}</h3>{_media(files, out_dir)}</section>"
+            for name, files in galleries.items()
+        )
+        parts.append(f"<h2>Per variant</h2><div class='grid'>{cards}</div>")
     if images:
         figs = "".join(
             f"<figure><a href='{_e(r)}'><img src='{_e(r)}' alt='{_e(c)}' loading='lazy'></a>"

@@ -17,10 +17,6 @@ from physanim.render.report import build_report
 from physanim.store import StageStore
 
 
-def _files(store: StageStore, stage: str, key: str) -> Path:
-    return store.root.resolve() / stage / key / "files"
-
-
 def variant_label(store: StageStore, evaluate_key: str) -> str:
     """Human label of an evaluate output: its material model and simulate key prefix."""
     sim_key = store.provenance("evaluate", evaluate_key)["upstream"]["simulate"]
@@ -37,7 +33,7 @@ def write_run_report(
     if "render" not in keys or not store.has("render", keys["render"]):
         return None
     out_dir.mkdir(parents=True, exist_ok=True)
-    render = _files(store, "render", keys["render"])
+    render = store.files("render", keys["render"])
     images = [
         (caption, render / f"{stem}.png")
         for caption, stem in (
@@ -46,7 +42,7 @@ def write_run_report(
             ("FEM energies", "energies"),
         )
     ]
-    regions = _files(store, "materials", keys["materials"]) / "regions.png"
+    regions = store.files("materials", keys["materials"]) / "regions.png"
     if regions.exists():
         images.append(("Material regions", regions))
 

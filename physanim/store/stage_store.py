@@ -130,6 +130,10 @@ class StageStore:
     def _path(self, stage: str, key: str) -> Path:
         return self.root / stage / key
 
+    def files(self, stage: str, key: str) -> Path:
+        """Directory of the plain files (PNG, MP4) of an output; absent if it wrote none."""
+        return self._path(stage, key).resolve() / "files"
+
     def has(self, stage: str, key: str) -> bool:
         """True when a complete output of ``stage`` with ``key`` exists."""
         meta = self._path(stage, key) / "zarr.json"

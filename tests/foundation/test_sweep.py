@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -66,4 +68,19 @@ def test_sweep_on_dask_computes_shared_stage_once(toy_config: Path, tmp_path: Pa
     totals = sorted(float(store.open("total", k)["total"][0]) for k in store.keys("total"))
     base = 499500 * 8 + 1000 * 28
     assert totals == pytest.approx([base, 2 * base, 3 * base])
-    assert (tmp_path / "data" / "runs" / "sweeps" / "sweep" / "summary.json").exists()
+    # the report puts the variants side by side with their own results, and times every run
+    sweeps = tmp_path / "data" / "runs" / "sweeps" / "sweep"
+    summary = json.loads((sweeps / "summary.json").read_text())
+    runs = summary["runs"]
+    assert sorted(r["stage"] for r in runs) == sorted(ran)
+    assert all(r["started"] > 0 and r["seconds"] > 0 and r["worker"] for r in runs)
+    report = (sweeps / "index.html").read_text()
+    header = "<th>measure</th>" + "".join(
+        f"<th>scale.factor={f}</th>" for f in ("1.0", "2.0", "3.0")
+    )
+    assert header in report
+    row = re.search(r"<tr><td>total: total</td>(.*?)</tr>", report)
+    assert row is not None
+    cells = [float(c) for c in re.findall(r'<td class="num">([^<]+)</td>', row.group(1))]
+    assert cells == pytest.approx([base, 2 * base, 3 * base], rel=1e-3)
+    assert (sweeps / "timeline.png").stat().st_size > 1000 and "timeline.png" in report
