@@ -9,12 +9,16 @@ from __future__ import annotations
 
 import json
 import os
+import socket
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import dask
+from distributed import LocalCluster
 from prefect import flow, task
 from prefect.cache_policies import NONE
 from prefect_dask import DaskTaskRunner
@@ -97,21 +101,85 @@ def worker_thread_env(workers: int, cores: int | None = None) -> dict[str, str]:
     return {name: str(per_worker) for name in THREAD_ENV}
 
 
-def _shared_prefect_api() -> dict[str, str]:
-    """PREFECT_API_URL for local workers: this process's server, started now if need be.
+def _prefect_api() -> tuple[str, Callable[[], str]]:
+    """PREFECT_API_URL for local workers (this process's server) and a function that starts
+    that server if need be and returns its final URL.
 
     Without it every worker process starts a temporary Prefect server of its own (about 15 s
-    of CPU each, measured here) to report its task runs to.
+    of CPU each, measured here) to report its task runs to. The URL is known before the
+    server is up, so the workers can start while it comes up.
     """
     from prefect.settings import PREFECT_API_URL
 
     if PREFECT_API_URL.value():
-        return {"PREFECT_API_URL": str(PREFECT_API_URL.value())}
+        url = str(PREFECT_API_URL.value())
+        return url, lambda: url
     from prefect.server.api.server import SubprocessASGIServer
 
     server = SubprocessASGIServer()  # the instance the flow run in this process will use
-    server.start()
-    return {"PREFECT_API_URL": server.api_url}
+    if not server.running and server.port is None:
+        server.port = server.find_available_port()
+
+    def start() -> str:
+        server.start()
+        return server.api_url
+
+    return server.api_url, start
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+class LocalDask:
+    """A local Dask cluster for one sweep, started in a background thread (so that it comes
+    up while Prefect's server does) and closed in one (while the report is written)."""
+
+    def __init__(self, workers: int, scratch: Path, env: dict[str, str]) -> None:
+        self.address = f"tcp://127.0.0.1:{_free_port()}"
+        self._cluster: LocalCluster | None = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(
+            target=self._start, args=(workers, scratch, env), name="physanim-dask-start"
+        )
+        self._thread.start()
+
+    def _start(self, workers: int, scratch: Path, env: dict[str, str]) -> None:
+        try:
+            with dask.config.set(NO_MALLOC_TRIM):
+                self._cluster = LocalCluster(
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    host="127.0.0.1",
+                    scheduler_port=int(self.address.rsplit(":", 1)[1]),
+                    dashboard_address=None,
+                    local_directory=str(scratch),
+                    preload=["flows.worker_preload"],
+                    env=env,
+                )
+        except BaseException as exc:  # re-raised in the caller's thread by wait()
+            self._error = exc
+
+    def wait(self) -> str:
+        """The scheduler address once every worker is up; raises if the cluster failed."""
+        self._thread.join()
+        if self._error is not None:
+            raise RuntimeError(f"local Dask cluster did not start: {self._error}") from self._error
+        return self.address
+
+    def close_in_background(self) -> threading.Thread:
+        """Start closing the cluster; join the returned thread before exiting."""
+        self._thread.join()
+        thread = threading.Thread(target=self._close, name="physanim-dask-close")
+        thread.start()
+        return thread
+
+    def _close(self) -> None:
+        if self._cluster is not None:
+            self._cluster.close()
 
 
 def run_sweep(
@@ -121,29 +189,29 @@ def run_sweep(
     pipeline, variants, configs, jobs = plan_sweep(path)
     run_dir = configs[variants[0].name].dataset.run_dir
     t0 = time.perf_counter()
+    closing = None
     if serial:
         results = [execute_stage(pipeline, configs[j.variant], j.entry) for j in jobs]
     elif jobs:
         scratch = Path(run_dir).resolve() / "dask"
         scratch.mkdir(parents=True, exist_ok=True)
         os.environ.setdefault("DASK_TEMPORARY_DIRECTORY", str(scratch))
-        if dask_address:
-            runner = DaskTaskRunner(address=dask_address)
-        else:
-            runner = DaskTaskRunner(
-                cluster_kwargs={
-                    "n_workers": workers,
-                    "threads_per_worker": 1,
-                    "processes": True,
-                    "dashboard_address": None,
-                    "local_directory": str(scratch),
-                    "preload": ["flows.worker_preload"],
-                    "env": {**worker_thread_env(workers), **_shared_prefect_api()},
-                }
-            )
+        local = None
+        if not dask_address:
+            url, start_server = _prefect_api()
+            env = {**worker_thread_env(workers), "PREFECT_API_URL": url}
+            local = LocalDask(workers, scratch, env)
+            if start_server() != url:  # the server had to move to another port: restart
+                local.close_in_background().join()
+                local = LocalDask(workers, scratch, {**env, "PREFECT_API_URL": start_server()})
+            dask_address = local.wait()
+        runner = DaskTaskRunner(address=dask_address)
         dumped = {k: c.model_dump(mode="json") for k, c in configs.items()}
-        with dask.config.set(NO_MALLOC_TRIM):
+        try:
             results = sweep_flow.with_options(task_runner=runner)(pipeline, dumped, jobs)
+        finally:
+            if local is not None:
+                closing = local.close_in_background()
     else:
         results = []
     seconds = time.perf_counter() - t0
@@ -210,4 +278,6 @@ def run_sweep(
         seconds=seconds,
         subtitle=f"{path}: {pipeline.name} pipeline,",
     )
+    if closing is not None:
+        closing.join()
     return SweepOutcome(table, list(results), seconds, out / "summary.json", report)
