@@ -13,7 +13,7 @@ import socket
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -201,10 +201,14 @@ def run_sweep(
             url, start_server = _prefect_api()
             env = {**worker_thread_env(workers), "PREFECT_API_URL": url}
             local = LocalDask(workers, scratch, env)
-            if start_server() != url:  # the server had to move to another port: restart
+            try:
+                if start_server() != url:  # the server had to move to another port: restart
+                    local.close_in_background().join()
+                    local = LocalDask(workers, scratch, {**env, "PREFECT_API_URL": start_server()})
+                dask_address = local.wait()
+            except BaseException:
                 local.close_in_background().join()
-                local = LocalDask(workers, scratch, {**env, "PREFECT_API_URL": start_server()})
-            dask_address = local.wait()
+                raise
         runner = DaskTaskRunner(address=dask_address)
         dumped = {k: c.model_dump(mode="json") for k, c in configs.items()}
         try:
@@ -216,6 +220,26 @@ def run_sweep(
         results = []
     seconds = time.perf_counter() - t0
 
+    try:
+        table, summary, report = _record_sweep(
+            Path(path), pipeline, variants, configs, list(results), seconds, Path(run_dir)
+        )
+    finally:
+        if closing is not None:
+            closing.join()
+    return SweepOutcome(table, list(results), seconds, summary, report)
+
+
+def _record_sweep(
+    path: Path,
+    pipeline: Pipeline,
+    variants: list[Variant],
+    configs: dict[str, Any],
+    results: list[StageResult],
+    seconds: float,
+    run_dir: Path,
+) -> tuple[dict[str, dict[str, str]], Path, Path]:
+    """Write the sweep's summary.json and report; returns (variant -> stage -> key, both paths)."""
     table: dict[str, dict[str, str]] = {}
     report_variants = []
     for v in variants:
@@ -237,47 +261,33 @@ def run_sweep(
                 files={e.stage: store.files(e.stage, e.key) for e in done},
             )
         )
-    out = Path(run_dir) / "sweeps" / Path(path).stem
+    out = run_dir / "sweeps" / path.stem
     out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(
-        json.dumps(
+    record = {
+        "sweep": str(path),
+        "seconds": seconds,
+        "variants": [
             {
-                "sweep": str(path),
-                "seconds": seconds,
-                "variants": [
-                    {
-                        "variant": v.name,
-                        "dataset": v.dataset,
-                        "keys": dict(v.keys),
-                        "summaries": dict(v.summaries),
-                        "overrides": list(v.overrides),
-                    }
-                    for v in report_variants
-                ],
-                "runs": [
-                    {
-                        "stage": r.stage,
-                        "key": r.key,
-                        "action": r.action,
-                        "seconds": r.seconds,
-                        "started": r.started,
-                        "worker": r.worker,
-                    }
-                    for r in results
-                ],  # fmt: skip
-            },
-            indent=2,
-            default=str,
-        )
-    )
+                "variant": v.name,
+                "dataset": v.dataset,
+                "configs": list(v.configs),
+                "overrides": list(v.overrides),
+                "keys": dict(v.keys),
+                "summaries": dict(v.summaries),
+            }
+            for v in report_variants
+        ],
+        "runs": [{k: x for k, x in asdict(r).items() if k != "summary"} for r in results],
+    }
+    partial = out / "summary.json.partial"  # renamed into place: never half-written
+    partial.write_text(json.dumps(record, indent=2, default=str))
+    partial.replace(out / "summary.json")
     report = write_sweep_report(
         out,
-        title=f"Sweep {Path(path).stem}",
+        title=f"Sweep {path.stem}",
         variants=report_variants,
         results=list(results),
         seconds=seconds,
         subtitle=f"{path}: {pipeline.name} pipeline,",
     )
-    if closing is not None:
-        closing.join()
-    return SweepOutcome(table, list(results), seconds, out / "summary.json", report)
+    return table, out / "summary.json", report
