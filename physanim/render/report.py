@@ -131,13 +131,17 @@ def _variants(variants: Mapping[str, Mapping[str, Any]]) -> str:
     return _table(("measure", *names), rows)
 
 
+def _video(src: str) -> str:
+    return f"<video controls loop muted playsinline preload='metadata' src='{src}'></video>"
+
+
 def _media(files: Sequence[tuple[str, str | Path]], out_dir: Path) -> str:
     """Videos and images (caption, path) as HTML, links relative to ``out_dir``."""
     parts = []
     for caption, path in files:
         src = _e(_rel(path, out_dir, f"file {caption!r}"))
         if Path(path).suffix.lower() in (".mp4", ".webm"):
-            tag = f"<video controls loop muted playsinline preload='metadata' src='{src}'></video>"
+            tag = _video(src)
         else:
             tag = f"<a href='{src}'><img src='{src}' alt='{_e(caption)}' loading='lazy'></a>"
         parts.append(f"<figure>{tag}<figcaption>{_e(caption)}</figcaption></figure>")
@@ -180,7 +184,7 @@ def build_report(
         src = _e(_rel(video, out_dir, "video"))
         parts.append(
             "<h2>Video</h2><section class='card'>"
-            f"<video controls loop muted playsinline preload='metadata' src='{src}'></video>"
+            f"{_video(src)}"
             f"<p><a href='{src}'>{src}</a></p></section>"
         )
     if key_figures:

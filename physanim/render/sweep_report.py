@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from matplotlib.figure import Figure as MplFigure
+from matplotlib.patches import Patch
 
 from physanim.pipeline.runner import StageResult
 from physanim.render.report import build_report
@@ -119,13 +119,12 @@ def plot_timeline(
             label = names[0] if len(names) == 1 else f"{len(names)} variants"
             ax.text(r.started - t0 + 0.01 * span, lane, label, va="center", fontsize=7,
                     clip_on=True)  # fmt: skip
-    for k, stage in enumerate(stages):
-        ax.barh(np.nan, 0, color=f"C{k % 10}", label=stage)
     ax.set_yticks(range(len(workers)), [f"worker {i + 1}" for i in range(len(workers))])
     ax.invert_yaxis()
     ax.set_xlabel("time since the first stage started (s)")
     ax.grid(axis="x", alpha=0.3)
-    ax.legend(fontsize=8, ncol=min(len(stages), 6), loc="lower center",
+    handles = [Patch(color=f"C{k % 10}", label=stage) for k, stage in enumerate(stages)]
+    ax.legend(handles=handles, fontsize=8, ncol=min(len(stages), 6), loc="lower center",
               bbox_to_anchor=(0.5, 1.08), frameon=False)  # fmt: skip
     stem.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
