@@ -64,8 +64,13 @@ def sweep_flow(
     return [f.result() for f in futures.values()]
 
 
-def plan_sweep(path: Path) -> tuple[Pipeline, list[Variant], dict[str, Any], list[Job]]:
-    """Expand a sweep file, validate every variant's config and merge their plans."""
+def plan_sweep(
+    path: Path,
+) -> tuple[Pipeline, list[Variant], dict[str, Any], dict[str, dict[str, str]], list[Job]]:
+    """Expand a sweep file, validate every variant's config and merge their plans.
+
+    Returns (pipeline, variants, variant -> config, variant -> stage -> key, jobs to run).
+    """
     spec, variants = load_sweep(path)
     pipeline = get_pipeline(spec.pipeline)
     configs: dict[str, Any] = {}
@@ -78,7 +83,8 @@ def plan_sweep(path: Path) -> tuple[Pipeline, list[Variant], dict[str, Any], lis
         store.remove_stale_temporaries()
         configs[v.name] = cfg
         plans[v.name] = (str(store.root), make_plan(pipeline, cfg, store))
-    return pipeline, variants, configs, merge_plans(plans) if plans else []
+    keys = {name: {e.stage: e.key for e in plan} for name, (_, plan) in plans.items()}
+    return pipeline, variants, configs, keys, merge_plans(plans) if plans else []
 
 
 #: Dask's nannies start local workers with MALLOC_TRIM_THRESHOLD_=65536, which hands every
@@ -186,7 +192,7 @@ def run_sweep(
     path: Path, *, dask_address: str | None = None, workers: int = 2, serial: bool = False
 ) -> SweepOutcome:
     """Run a sweep; ``serial`` runs the jobs one by one in this process (reference timing)."""
-    pipeline, variants, configs, jobs = plan_sweep(path)
+    pipeline, variants, configs, keys, jobs = plan_sweep(path)
     run_dir = configs[variants[0].name].dataset.run_dir
     t0 = time.perf_counter()
     closing = None
@@ -221,13 +227,13 @@ def run_sweep(
     seconds = time.perf_counter() - t0
 
     try:
-        table, summary, report = _record_sweep(
-            Path(path), pipeline, variants, configs, list(results), seconds, Path(run_dir)
+        summary, report = _record_sweep(
+            Path(path), pipeline, variants, configs, keys, list(results), seconds, Path(run_dir)
         )
     finally:
         if closing is not None:
             closing.join()
-    return SweepOutcome(table, list(results), seconds, summary, report)
+    return SweepOutcome(keys, list(results), seconds, summary, report)
 
 
 def _record_sweep(
@@ -235,30 +241,25 @@ def _record_sweep(
     pipeline: Pipeline,
     variants: list[Variant],
     configs: dict[str, Any],
+    keys: dict[str, dict[str, str]],
     results: list[StageResult],
     seconds: float,
     run_dir: Path,
-) -> tuple[dict[str, dict[str, str]], Path, Path]:
-    """Write the sweep's summary.json and report; returns (variant -> stage -> key, both paths)."""
-    table: dict[str, dict[str, str]] = {}
+) -> tuple[Path, Path]:
+    """Write the sweep's summary.json and report (HTML); returns their paths."""
     report_variants = []
     for v in variants:
-        cfg = configs[v.name]
-        store = StageStore(cfg.dataset.store_path)
-        plan = make_plan(pipeline, cfg, store)
-        table[v.name] = {e.stage: e.key for e in plan}
-        done = [e for e in plan if store.has(e.stage, e.key)]
+        store = StageStore(configs[v.name].dataset.store_path)
+        done = {stage: key for stage, key in keys[v.name].items() if store.has(stage, key)}
         report_variants.append(
             SweepVariant(
                 name=v.name,
                 dataset=v.dataset,
                 configs=v.configs,
                 overrides=v.overrides,
-                keys=table[v.name],
-                summaries={
-                    e.stage: store.provenance(e.stage, e.key).get("summary", {}) for e in done
-                },
-                files={e.stage: store.files(e.stage, e.key) for e in done},
+                keys=keys[v.name],
+                summaries={s: store.provenance(s, k).get("summary", {}) for s, k in done.items()},
+                files={s: store.files(s, k) for s, k in done.items()},
             )
         )
     out = run_dir / "sweeps" / path.stem
@@ -290,4 +291,4 @@ def _record_sweep(
         seconds=seconds,
         subtitle=f"{path}: {pipeline.name} pipeline,",
     )
-    return table, out / "summary.json", report
+    return out / "summary.json", report
