@@ -1,6 +1,7 @@
 """The whole face DAG on a short demo, at coarse resolution: outputs, caching, physics.
 
-One module-scoped run (about 10 frames, coarse scan and tets) feeds every test here.
+One module-scoped sweep of the shipped material models and the default run on its store
+(12 frames, coarse scan and tets) feed every test here.
 """
 
 from __future__ import annotations
