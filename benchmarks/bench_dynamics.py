@@ -1,5 +1,12 @@
-"""Forward-dynamics time per step (2-link arm and 30-DOF human), compiled kernels vs a
-plain-numpy reference (loop over bodies, vectorised over the H columns) in the same run.
+"""Forward dynamics per call (2-link arm and 30-DOF human) against Pinocchio's ABA and
+MuJoCo's mj_forward, measured side by side in the same run (the ``refs`` extra).
+Columns: physanim ABA (the default), CRBA + Newton-Euler bias + solve, the seed's method
+(H column by column from inverse dynamics), Pinocchio ``aba``, MuJoCo ``mj_forward`` (the
+whole forward pass), the ratio ABA / Pinocchio and the largest disagreement with Pinocchio.
+
+Each time is the median over 40 blocks of 250 calls through each library's Python API
+(inputs already arrays).  Targets: physanim ``forward_dynamics`` (ABA) within 2x of
+Pinocchio on the human and within 5x on the arm.
 
 Run: .venv/bin/python benchmarks/bench_dynamics.py
 """
@@ -9,96 +16,86 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import mujoco
 import numpy as np
+import pinocchio as pin
 
-from physanim.dynamics import Figure, forward_dynamics
+from physanim.dynamics import Figure, forward_dynamics, inverse_dynamics
+from physanim.dynamics.reference_models import mujoco_model, pinocchio_model
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "figures"
-G = np.array([0.0, -9.81, 0.0])
+TARGET = {"arm2": 5.0, "human30": 2.0}  # allowed ratio physanim ABA / Pinocchio ABA
 
 
-def _rodrigues(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """(B, 3, 3) rotations about a unit axis (3,) by angles q (B,)."""
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    c, s = np.cos(q)[:, None, None], np.sin(q)[:, None, None]
-    return np.eye(3) + s * k + (1 - c) * (k @ k)
-
-
-def rnea_numpy(fig: Figure, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, a0: np.ndarray):
-    """Reference Newton-Euler in plain numpy: q, qd, qdd (B, n); a0 (B, 3) -> tau (B, n)."""
-    nb, n = q.shape
-    rot, pos = np.zeros((n, nb, 3, 3)), np.zeros((n, nb, 3))
-    w, al, acc = np.zeros((n, nb, 3)), np.zeros((n, nb, 3)), np.zeros((n, nb, 3))
-    f, mo, z = np.zeros((n, nb, 3)), np.zeros((n, nb, 3)), np.zeros((n, nb, 3))
-    for i in range(n):
-        p = fig.parent[i]
-        rp = np.broadcast_to(np.eye(3), (nb, 3, 3)) if p < 0 else rot[p]
-        pp = np.zeros((nb, 3)) if p < 0 else pos[p]
-        wp = np.zeros((nb, 3)) if p < 0 else w[p]
-        ap = np.zeros((nb, 3)) if p < 0 else al[p]
-        lp = a0 if p < 0 else acc[p]
-        rot[i] = rp @ _rodrigues(fig.axis[i], q[:, i])
-        pos[i] = pp + rp @ fig.offset[i]
-        r = pos[i] - pp
-        z[i] = rot[i] @ fig.axis[i]
-        acc[i] = lp + np.cross(ap, r) + np.cross(wp, np.cross(wp, r))
-        w[i] = wp + z[i] * qd[:, i, None]
-        al[i] = ap + z[i] * qdd[:, i, None] + np.cross(wp, z[i] * qd[:, i, None])
-        c = rot[i] @ fig.com[i]
-        fc = fig.mass[i] * (acc[i] + np.cross(al[i], c) + np.cross(w[i], np.cross(w[i], c)))
-        iw = rot[i] @ fig.inertia[i] @ np.swapaxes(rot[i], 1, 2)
-        f[i] = fc
-        mo[i] = (iw @ al[i][..., None])[..., 0] + np.cross(w[i], (iw @ w[i][..., None])[..., 0])
-        mo[i] += np.cross(c, fc)
-    tau = np.zeros((nb, n))
-    for i in range(n - 1, -1, -1):
-        tau[:, i] = np.einsum("bk,bk->b", z[i], mo[i])
-        p = fig.parent[i]
-        if p >= 0:
-            f[p] += f[i]
-            mo[p] += mo[i] + np.cross(pos[i] - pos[p], f[i])
-    return tau
-
-
-def forward_numpy(fig: Figure, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """Seed method in plain numpy: bias and all H columns in one batched RNEA call."""
-    n = fig.n_dof
-    qs = np.vstack([q, np.broadcast_to(q, (n, n))])
-    qds = np.vstack([qd, np.zeros((n, n))])
-    qdds = np.vstack([np.zeros(n), np.eye(n)])
-    a0 = np.vstack([-G, np.zeros((n, 3))])
-    out = rnea_numpy(fig, qs, qds, qdds, a0)
-    return np.linalg.solve(out[1:].T, -out[0])
-
-
-def _time(fn, reps: int) -> float:
-    fn()
-    t0 = time.perf_counter()
-    for _ in range(reps):
+def _median_us(fn, block: int = 250, blocks: int = 40) -> float:
+    """Median time per call (us) over ``blocks`` blocks of ``block`` calls."""
+    for _ in range(block):
         fn()
-    return (time.perf_counter() - t0) / reps
+    times = []
+    for _ in range(blocks):
+        t0 = time.perf_counter()
+        for _ in range(block):
+            fn()
+        times.append((time.perf_counter() - t0) / block)
+    return float(np.median(times)) * 1e6
+
+
+def _figure_row(name: str, rng: np.random.Generator) -> str:
+    """One table row: per-call times, the ratio to Pinocchio and the largest disagreement."""
+    fig = Figure.from_yaml(CONFIGS / f"{name}.yaml")
+    q = rng.uniform(-0.5, 0.5, fig.n_dof)
+    qd, tau = rng.normal(size=fig.n_dof), rng.normal(size=fig.n_dof)
+    pm = pinocchio_model(fig)
+    pd = pm.createData()
+    mm = mujoco_model(fig)
+    md = mujoco.MjData(mm)
+    md.qpos[:], md.qvel[:], md.qfrc_applied[:] = q, qd, tau
+    mujoco.mj_forward(mm, md)
+    ref = pin.aba(pm, pd, q, qd, tau)
+    err = max(
+        np.abs(forward_dynamics(fig, q, qd, tau, method=m) - ref).max()
+        for m in ("aba", "crba", "rnea")
+    )
+    err = max(err, float(np.abs(md.qacc - ref).max()))
+    t = {
+        "aba": _median_us(lambda: forward_dynamics(fig, q, qd, tau)),
+        "crba": _median_us(lambda: forward_dynamics(fig, q, qd, tau, method="crba")),
+        "rnea": _median_us(lambda: forward_dynamics(fig, q, qd, tau, method="rnea")),
+        "pin": _median_us(lambda: pin.aba(pm, pd, q, qd, tau)),
+        "mj": _median_us(lambda: mujoco.mj_forward(mm, md)),
+    }
+    ratio = t["aba"] / t["pin"]
+    verdict = "ok" if ratio <= TARGET[name] else "MISSED"
+    return (
+        f"{name:8s} {fig.n_dof:3d} {t['aba']:6.2f}us {t['crba']:6.2f}us {t['rnea']:6.2f}us "
+        f"{t['pin']:8.2f}us {t['mj']:6.2f}us {ratio:7.2f}x {TARGET[name]:5.0f}x "
+        f"{err:11.2e} {verdict}"
+    )
 
 
 def main() -> None:
     rng = np.random.default_rng(0)
     print(
-        f"{'figure':10s} {'DOF':>4s} {'numpy ref':>12s} {'seed (numba)':>13s} "
-        f"{'CRBA (numba)':>13s} {'speed-up':>9s} {'max |dqdd|':>11s}"
+        f"{'figure':8s} {'DOF':>3s} {'ABA':>8s} {'CRBA':>8s} {'seed':>8s} "
+        f"{'Pinocchio':>10s} {'MuJoCo':>8s} {'ABA/pin':>8s} {'target':>7s} {'max |dqdd|':>11s}"
     )
     for name in ("arm2", "human30"):
-        fig = Figure.from_yaml(CONFIGS / f"{name}.yaml")
-        q, qd = rng.uniform(-0.5, 0.5, fig.n_dof), rng.normal(size=fig.n_dof)
-        ref = forward_numpy(fig, q, qd)
-        err = max(
-            np.abs(forward_dynamics(fig, q, qd, method=m) - ref).max() for m in ("rnea", "crba")
-        )
-        t_np = _time(lambda fig=fig, q=q, qd=qd: forward_numpy(fig, q, qd), 50)
-        t_rn = _time(lambda fig=fig, q=q, qd=qd: forward_dynamics(fig, q, qd, method="rnea"), 500)
-        t_cr = _time(lambda fig=fig, q=q, qd=qd: forward_dynamics(fig, q, qd, method="crba"), 500)
-        print(
-            f"{name:10s} {fig.n_dof:4d} {t_np * 1e3:9.3f} ms {t_rn * 1e3:10.3f} ms "
-            f"{t_cr * 1e3:10.3f} ms {t_np / min(t_rn, t_cr):8.1f}x {err:11.2e}"
-        )
+        print(_figure_row(name, rng))
+    # batched inverse dynamics over a trajectory (one call) against a Pinocchio loop
+    fig = Figure.from_yaml(CONFIGS / "human30.yaml")
+    pm = pinocchio_model(fig)
+    pd = pm.createData()
+    q, qd, qdd = (rng.normal(size=(1000, fig.n_dof)) for _ in range(3))
+    t_ours = _median_us(lambda: inverse_dynamics(fig, q, qd, qdd), block=2, blocks=15)
+    t_pin = _median_us(
+        lambda: [pin.rnea(pm, pd, a, b, c) for a, b, c in zip(q, qd, qdd, strict=True)],
+        block=2,
+        blocks=15,
+    )
+    print(
+        f"inverse dynamics, 1000 poses of human30: physanim {t_ours / 1e3:.2f} ms (one call), "
+        f"Pinocchio rnea loop {t_pin / 1e3:.2f} ms"
+    )
 
 
 if __name__ == "__main__":

@@ -113,6 +113,24 @@ class Figure:
         """Distal capsule end of every link, (n, 3) m in the link frame."""
         return np.ascontiguousarray(self.length[:, None] * self.direction)
 
+    @cached_property
+    def packed(self) -> np.ndarray:
+        """Per-link constants in one (n, 22) array for the compiled kernels: axis, offset,
+        mass, COM, inertia (row-major) and tip (layout in ``physanim.dynamics.kernels``)."""
+        return np.ascontiguousarray(
+            np.concatenate(
+                [
+                    self.axis,
+                    self.offset,
+                    self.mass[:, None],
+                    self.com,
+                    self.inertia.reshape(-1, 9),
+                    self.tips,
+                ],
+                axis=1,
+            )
+        )
+
     @property
     def total_mass(self) -> float:
         """Total mass, kg."""

@@ -1,4 +1,5 @@
-"""Inverse dynamics (SPEC eq 1), inertia matrix (eqs 3-4 or CRBA) and forward dynamics (eq 2).
+"""Inverse dynamics (SPEC eq 1), inertia matrix (eqs 3-4 or CRBA) and forward dynamics (eq 2,
+or the articulated-body algorithm).
 
 The base is fixed in orientation (base frame = world axes) and may accelerate linearly.
 Joint torques follow ``H(q) qdd + B(q, qd) = tau``.
@@ -12,12 +13,16 @@ from typing import Literal
 import numpy as np
 
 from physanim.dynamics.figure import Figure
-from physanim.dynamics.kernels import crba, rnea_batch
+from physanim.dynamics.kernels import aba, crba, rnea_batch
 from physanim.dynamics.kinematics import _as_batch, forward_kinematics, link_coms
 
 Vec3 = tuple[float, float, float]
 GRAVITY: Vec3 = (0.0, -9.81, 0.0)
 Method = Literal["crba", "rnea"]
+ForwardMethod = Literal["aba", "crba", "rnea"]
+_MINUS_G = -np.asarray(GRAVITY)
+_NONE = np.zeros(0)  # ``aba``: no joint torques
+_NO_LOADS = np.zeros((0, 6))  # ``aba``: no external loads
 
 
 def _base_term(gravity: np.ndarray | Vec3, base_acc: np.ndarray | None, nb: int) -> np.ndarray:
@@ -93,7 +98,7 @@ def mass_matrix(fig: Figure, q: np.ndarray, *, method: Method = "crba") -> np.nd
     q2, _ = _as_batch(fig, q)
     n = fig.n_dof
     if method == "crba":
-        return crba(fig.parent, fig.axis, fig.offset, fig.mass, fig.com, fig.inertia, q2[0])
+        return crba(fig.parent, fig.packed, q2[0])
     if method == "rnea":
         h = rnea_batch(
             fig.parent,
@@ -152,25 +157,54 @@ def solve_with_known(
     return qdd
 
 
+def _joint_vector(fig: Figure, x: np.ndarray | None, name: str) -> np.ndarray:
+    """``x`` as a float (n,) array (zeros if None); ValueError naming ``name`` otherwise."""
+    if x is None:
+        return np.zeros(fig.n_dof)
+    a = np.asarray(x, dtype=float)
+    if a.shape != (fig.n_dof,):
+        raise ValueError(
+            f"{name} must have shape ({fig.n_dof},) for figure {fig.name!r}, got {a.shape}"
+        )
+    return a
+
+
 def forward_dynamics(
     fig: Figure,
     q: np.ndarray,
     qd: np.ndarray,
     tau: np.ndarray | None = None,
     *,
-    method: Method = "crba",
+    method: ForwardMethod = "aba",
     gravity: np.ndarray | Vec3 = GRAVITY,
     base_acc: np.ndarray | None = None,
     ext_forces: Mapping[str, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Joint accelerations qdd (n,) rad/s^2 from H qdd = tau - B (SPEC eq 2).
+    """Joint accelerations qdd (n,) rad/s^2 of H qdd = tau - B (SPEC eq 2).
 
     q, qd, tau: (n,) rad, rad/s, N m (tau defaults to zero: passive motion).  ``method``
-    selects how H is built (see :func:`mass_matrix`); the other arguments as in
-    :func:`inverse_dynamics`.
+    ``"aba"`` (default) runs Featherstone's O(n) articulated-body algorithm; ``"crba"`` and
+    ``"rnea"`` build H (see :func:`mass_matrix`) and the bias B by Newton-Euler and solve.
+    The other arguments as in :func:`inverse_dynamics`.  All three agree to rounding.
     """
+    if method == "aba":
+        if gravity is GRAVITY and base_acc is None:
+            a0 = _MINUS_G
+        else:
+            a0 = _base_term(gravity, base_acc, 1)[0]
+        return aba(
+            fig.parent,
+            fig.packed,
+            _joint_vector(fig, q, "q"),
+            _joint_vector(fig, qd, "qd"),
+            _NONE if tau is None else _joint_vector(fig, tau, "tau"),
+            a0,
+            _NO_LOADS if ext_forces is None else _ext_array(fig, ext_forces, 1)[0],
+        )
+    if method not in ("crba", "rnea"):
+        raise ValueError(f"method must be 'aba', 'crba' or 'rnea', got {method!r}")
     n = fig.n_dof
-    t = np.zeros(n) if tau is None else np.asarray(tau, dtype=float)
+    t = _joint_vector(fig, tau, "tau")
     b = bias_forces(fig, q, qd, gravity=gravity, base_acc=base_acc, ext_forces=ext_forces)
     h = mass_matrix(fig, q, method=method)
     return solve_with_known(h, t - b, np.zeros(n, dtype=bool), np.zeros(n))

@@ -24,7 +24,7 @@ def _random_state(fig, rng):
 
 
 @pytest.mark.parametrize("name", ["arm2", "human"])
-@pytest.mark.parametrize("method", ["crba", "rnea"])
+@pytest.mark.parametrize("method", ["aba", "crba", "rnea"])
 def test_forward_inverts_inverse(name, method, request):
     fig = request.getfixturevalue(name)
     rng = np.random.default_rng(1)
