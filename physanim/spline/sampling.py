@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from physanim.spline.cubic import _GL_W, _GL_X, Spline
+from physanim.spline.cubic import Spline
 
 
 def uniform_parameter(spline: Spline, per_segment: int) -> np.ndarray:
@@ -20,7 +20,7 @@ def uniform_parameter(spline: Spline, per_segment: int) -> np.ndarray:
     parameter, plus the last data point; returns parameters t (k,)."""
     if per_segment < 1:
         raise ValueError(f"per_segment must be >= 1, got {per_segment}")
-    knots = spline.knots[spline.knots <= spline.t_end + 1e-12]
+    knots = spline.real_knots
     a, b = knots[:-1, None], knots[1:, None]
     j = np.arange(per_segment) / per_segment
     return np.append((a + (b - a) * j).ravel(), spline.t_end)
@@ -43,28 +43,20 @@ def from_increments(increments: Sequence[float] | np.ndarray) -> np.ndarray:
     return cum / cum[-1]
 
 
-def equal_curvature(spline: Spline, count: int, *, resolution: int = 64) -> np.ndarray:
+def equal_curvature(spline: Spline, count: int) -> np.ndarray:
     """Relative positions (count,) with equal integral of the curvature proxy K ds
-    between consecutive samples (slow where curved, fast where straight)."""
+    between consecutive samples (slow where curved, fast where straight); the integral is
+    the spline's adaptive Q(t), inverted exactly at each target."""
     if count < 2:
         raise ValueError(f"count must be >= 2, got {count}")
-    knots = spline.knots[spline.knots <= spline.t_end + 1e-12]
-    # fine sub-intervals, Gauss-Legendre on each: Q(t) = int K |P'| dt, s(t) = int |P'| dt
-    t = np.unique(
-        np.concatenate(
-            [np.linspace(a, b, resolution + 1) for a, b in zip(knots[:-1], knots[1:], strict=True)]
-        )
-    )
-    a, b = t[:-1], t[1:]
-    half = 0.5 * (b - a)
-    nodes = a[:, None] + half[:, None] * (1.0 + _GL_X)
-    speed = spline.speed(nodes)
-    q = np.concatenate([[0.0], np.cumsum(half * ((spline.curvature_proxy(nodes) * speed) @ _GL_W))])
-    s = np.concatenate([[0.0], np.cumsum(half * (speed @ _GL_W))])
-    if q[-1] <= 0:
+    q = spline.curvature
+    total = float(q.cumulative[-1])
+    if total <= 0:
         return equal_arc(count)  # a straight line: K = 0 everywhere
-    targets = np.linspace(0.0, q[-1], count)
-    return np.interp(targets, q, s) / s[-1]
+    t = q.inverse(np.linspace(0.0, total, count))
+    fractions = spline.arc_length(t) / spline.length
+    fractions[0], fractions[-1] = 0.0, 1.0
+    return np.maximum.accumulate(fractions)
 
 
 def place(spline: Spline, fractions: np.ndarray) -> np.ndarray:
