@@ -107,6 +107,8 @@ def _log_result(r: StageResult) -> None:
         console.print(f"[green]{r.stage}[/green]: cached ({r.key[:12]})")
     else:
         console.print(f"[yellow]{r.stage}[/yellow]: ran in {r.seconds:.2f} s ({r.key[:12]})")
+        for warning in r.summary.get("warnings", ()):
+            console.print(f"[yellow]warning:[/yellow] {warning}", highlight=False)
 
 
 @app.command()

@@ -2,18 +2,37 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from physanim.muscle.params import ArmConditions
 from physanim.pipeline import StageContext, StageSpec
 
+if TYPE_CHECKING:  # the solver loads numba; planning does not need it
+    from physanim.muscle.arm import TorqueShortfall
+
+
+def shortfall_warning(condition: str, gap: TorqueShortfall) -> str:
+    """One line naming the condition, joint, time span and the missing torque."""
+    kind = "flexion" if gap.peak_Nm > 0 else "extension"
+    return (
+        f"arm condition {condition!r}: the muscles cannot produce the torque at {gap.joint} from "
+        f"{1000 * gap.start_s:.0f} to {1000 * gap.end_s:.0f} ms; up to {abs(gap.peak_Nm):.2f} "
+        f"N m of {kind} missing (at {1000 * gap.peak_time_s:.0f} ms)"
+    )
+
 
 def compute(ctx: StageContext) -> None:
-    """Solve each condition; arrays under ``<condition>/<field>`` (time axis first)."""
-    from physanim.muscle.arm import solve_arm
+    """Solve each condition; arrays under ``<condition>/<field>`` (time axis first).
+
+    The summary flags torques the muscles cannot produce (``feasible``, ``infeasible`` spans
+    per condition) and ``warnings`` carries one line per span for the CLI.
+    """
+    from physanim.muscle.arm import solve_arm, torque_shortfalls
 
     params: ArmConditions = ctx.params  # type: ignore[assignment]
     studies = params.resolved()
     report = ctx.progress("muscles")
-    peaks = {}
+    peaks, infeasible, warnings = {}, {}, []
     for i, (name, study) in enumerate(studies.items()):
         result = solve_arm(study)
         ctx.write_record(result, prefix=name)
@@ -21,11 +40,28 @@ def compute(ctx: StageContext) -> None:
             m.name: round(float(result.activation[:, j].max()), 4)
             for j, m in enumerate(study.arm.muscles)
         }
+        joints = [f"J{j} ({link.name})" for j, link in enumerate(study.arm.links)]
+        gaps = torque_shortfalls(result, joints)
+        if gaps:
+            infeasible[name] = [
+                {
+                    "joint": g.joint,
+                    "from_ms": round(1000 * g.start_s, 1),
+                    "to_ms": round(1000 * g.end_s, 1),
+                    "peak_missing_Nm": round(g.peak_Nm, 4),
+                }
+                for g in gaps
+            ]
+            warnings += [shortfall_warning(name, g) for g in gaps]
         report(i + 1, len(studies))
     ctx.summary["peak_activation"] = peaks
     ctx.summary["max_torque_residual_Nm"] = max(
         float(abs(ctx.out[f"{n}/torque_residual"][...]).max()) for n in studies
     )
+    ctx.summary["feasible"] = not infeasible
+    ctx.summary["infeasible"] = infeasible
+    if warnings:
+        ctx.summary["warnings"] = warnings
 
 
 SPEC = StageSpec(

@@ -60,6 +60,44 @@ class ArmResult:
     torque_residual: NDArray[np.float64]
 
 
+@dataclass(frozen=True)
+class TorqueShortfall:
+    """A stretch of time where the muscles cannot produce the torque at one joint.
+
+    ``joint`` name; ``start_s``/``end_s`` first and last sample times, s; ``peak_Nm`` the
+    largest missing torque (signed: positive = flexion missing), N m; ``peak_time_s`` when.
+    """
+
+    joint: str
+    start_s: float
+    end_s: float
+    peak_Nm: float
+    peak_time_s: float
+
+
+def torque_shortfalls(
+    result: ArmResult, joint_names: list[str], tol: float = 1e-6
+) -> list[TorqueShortfall]:
+    """Every stretch of consecutive samples with |torque_residual| > ``tol`` N m, per joint."""
+    out = []
+    for j, name in enumerate(joint_names):
+        res = result.torque_residual[:, j]
+        bad = np.abs(res) > tol
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(int), [0]])))
+        for start, stop in zip(edges[::2], edges[1::2], strict=True):
+            k = start + int(np.argmax(np.abs(res[start:stop])))
+            out.append(
+                TorqueShortfall(
+                    name,
+                    float(result.time[start]),
+                    float(result.time[stop - 1]),
+                    float(res[k]),
+                    float(result.time[k]),
+                )
+            )
+    return out
+
+
 def crossed_joint(arm: ArmParams) -> NDArray[np.int_]:
     """The joint each muscle crosses (m,); raises ValueError for a biarticular muscle."""
     joints = []
@@ -80,9 +118,12 @@ def solve_arm(
     """Torques, muscle forces and activations of one condition (arm, motion, model).
 
     Force sharing and the fibre state depend on each other (tendon stretch moves the fibre;
-    fibre length and velocity set what a unit of activation buys), so they are alternated
-    ``model.sharing_iterations`` times starting from rigid tendons; ``progress(done, total)``
-    is called after each pass.
+    fibre length and velocity set what a unit of activation buys), so they are alternated,
+    starting from rigid tendons, until the tendon forces change by less than 1e-9 F0 (at most
+    ``model.sharing_iterations`` passes); ``progress(done, total)`` is called after each pass.
+    Static optimisation works on the reported activations themselves (objective and
+    co-contraction floor); where the muscles cannot produce the torque it takes the closest
+    torque they can, and ``torque_residual`` holds the missing torque.
     """
     arm, motion, model = study.arm, study.motion, study.model
     n_t = int(round(motion.duration * motion.sample_rate)) + 1
@@ -96,24 +137,35 @@ def solve_arm(
     paths = muscle_paths(arm, q)
     mc = MuscleConstants.from_arm(arm)
     joint_of_muscle = crossed_joint(arm) if model.force_sharing == "seed_rule" else None
+    lower = np.full_like(paths.length, model.co_contraction)
 
     force = np.zeros_like(paths.length)
+    activation = lower
     for k in range(model.sharing_iterations):
         state = fibre_state(paths.length, force, mc)
         vel = fibre_velocity(state.fibre_length, dt)
-        floor = tendon_force_at(np.zeros_like(force), state, vel, mc, model)
-        gain = tendon_force_at(np.ones_like(force), state, vel, mc, model) - floor
-        minimum = floor + model.co_contraction * gain
+
+        def force_of(a: NDArray[np.float64], state=state, vel=vel) -> NDArray[np.float64]:
+            return tendon_force_at(a, state, vel, mc, model)
+
         if joint_of_muscle is not None:
-            force = seed_rule(paths.moment_arm, torque, minimum, joint_of_muscle)
+            new = seed_rule(paths.moment_arm, torque, force_of(lower), joint_of_muscle)
         else:
-            force = static_optimisation(paths.moment_arm, torque, floor, gain, minimum)
+            activation, _ = static_optimisation(paths.moment_arm, torque, force_of, lower)
+            new = force_of(activation)
+        change = np.abs(new - force).max(initial=0.0) / mc.max_isometric_force.max()
+        force = new
         if progress is not None:
             progress(k + 1, model.sharing_iterations)
+        if change <= 1e-9:
+            break
 
     state = fibre_state(paths.length, force, mc)
     vel = fibre_velocity(state.fibre_length, dt)
-    activation, shortfall = solve_activation(force, state, vel, mc, model)
+    if joint_of_muscle is not None:
+        activation, shortfall = solve_activation(force, state, vel, mc, model)
+    else:
+        shortfall = np.zeros_like(force)  # static optimisation asks only for reachable forces
     delivered = force - shortfall
     residual = torque - np.einsum("tmn,tm->tn", paths.moment_arm, delivered)
     bodies, _ = body_frames(fig, q)

@@ -186,7 +186,7 @@ class ModelParams(BaseModel):
     force_sharing: Literal["seed_rule", "static_optimisation"] = Field(
         "static_optimisation",
         description="seed_rule: the muscle whose moment matches the torque sign carries it; "
-        "static_optimisation: minimise the sum of squared activations",
+        "static_optimisation: minimise the sum of squared activations (the reported ones)",
     )
     co_contraction: float = Field(
         0.0,
@@ -205,7 +205,11 @@ class ModelParams(BaseModel):
         "(1 = force-velocity independent of activation)",
     )
     sharing_iterations: int = Field(
-        6, ge=1, le=100, description="fixed-point passes between force sharing and fibre state"
+        20,
+        ge=1,
+        le=100,
+        description="most fixed-point passes between force sharing and fibre state (they "
+        "stop once the tendon forces change by less than 1e-9 F0)",
     )
 
 

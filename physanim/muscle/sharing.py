@@ -1,12 +1,13 @@
 """Muscle force sharing: tendon forces F (T, m) N whose joint torques equal tau (T, n) N m.
 
 Torque of the muscles at joint j: sum_k R[t, k, j] F[t, k] (seed eqs 10-11), with R the moment
-arms (T, m, n) m.  Each muscle's force lies between its floor P (the force at a = 0, passive,
-or the co-contraction minimum) and P + G (G: the extra force at a = 1), both (T, m) N, at the
-current fibre state.
+arms (T, m, n) m.  At a given fibre state each muscle's force is an increasing function F(a)
+of its activation a in [0, 1] (``force_of``); static optimisation works on a itself.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -14,6 +15,8 @@ from scipy.optimize import lsq_linear
 
 NEWTON_STEPS = 100
 FEASIBILITY_TOL = 1e-9  # N m, torque residual accepted by the QP
+SQP_STEPS = 50  # linearisations of F(a) in static optimisation
+ACTIVATION_TOL = 1e-12  # change in a that ends them
 
 
 def seed_rule(
@@ -56,19 +59,16 @@ def _clip(x: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float6
     return np.minimum(np.maximum(x, lo), hi)
 
 
-def box_qp(
+def _dual_newton(
     a: NDArray[np.float64],
     b: NDArray[np.float64],
     lo: NDArray[np.float64],
     hi: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Batched min 1/2 |x|^2 s.t. A x = b, lo <= x <= hi, by Newton's method on the dual.
+) -> NDArray[np.float64]:
+    """Maximise the dual of min 1/2 |x|^2 s.t. A x = b, lo <= x <= hi; returns x(lam) (T, m).
 
-    a (T, n, m), b (T, n), lo/hi (T, m).  x(lam) = clip(A^T lam, lo, hi) minimises the
-    Lagrangian; the concave dual g(lam) is maximised by semismooth Newton steps with
-    backtracking, which end exactly once the active set is right.  Rows whose constraints
-    cannot be met inside the box get the least-squares point of the box instead.  Returns x
-    (T, m) and the residual A x - b (T, n).
+    x(lam) = clip(A^T lam, lo, hi) minimises the Lagrangian; the concave dual is maximised by
+    semismooth Newton steps with backtracking, which end exactly once the active set is right.
     """
     nt, n, _ = a.shape
     lam = np.zeros((nt, n))
@@ -98,13 +98,36 @@ def box_qp(
                 break
             scale = np.where(worse, 0.5 * scale, scale)
         lam = lam + scale[:, None] * step
-    x = primal(lam)
+    return primal(lam)
+
+
+def box_qp(
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Batched min 1/2 |x|^2 s.t. A x = b, lo <= x <= hi (dual Newton, :func:`_dual_newton`).
+
+    a (T, n, m), b (T, n), lo/hi (T, m).  Rows whose constraints cannot be met inside the box
+    get the closest reachable right-hand side b* (bounded least squares; b* is unique, the box's
+    image being convex) and then the smallest x with A x = b*: no load-free co-contraction.
+    Returns x (T, m) and the residual A x - b (T, n).
+    """
+    x = _dual_newton(a, b, lo, hi)
     resid = np.einsum("tnm,tm->tn", a, x) - b
     bad = np.flatnonzero(np.any(np.abs(resid) > FEASIBILITY_TOL, axis=1))
-    for i in bad:  # infeasible rows only: the closest reachable torques
-        upper = np.where(hi[i] > lo[i], hi[i], np.nextafter(lo[i], np.inf))
-        x[i] = lsq_linear(a[i], b[i], bounds=(lo[i], upper)).x
     if bad.size:
+        reach = np.empty((bad.size, b.shape[1]))
+        for k, i in enumerate(bad):  # infeasible rows only: the closest reachable torques
+            upper = np.where(hi[i] > lo[i], hi[i], np.nextafter(lo[i], np.inf))
+            x[i] = lsq_linear(a[i], b[i], bounds=(lo[i], upper), method="bvls").x
+            reach[k] = a[i] @ x[i]
+        smallest = _dual_newton(a[bad], reach, lo[bad], hi[bad])
+        met = np.all(
+            np.abs(np.einsum("tnm,tm->tn", a[bad], smallest) - reach) <= FEASIBILITY_TOL, 1
+        )
+        x[bad[met]] = smallest[met]
         resid = np.einsum("tnm,tm->tn", a, x) - b
     return x, resid
 
@@ -112,23 +135,39 @@ def box_qp(
 def static_optimisation(
     moment_arm: NDArray[np.float64],
     torque: NDArray[np.float64],
-    floor: NDArray[np.float64],
-    gain: NDArray[np.float64],
-    minimum: NDArray[np.float64] | None = None,
-) -> NDArray[np.float64]:
-    """Forces minimising the sum of squared activations, a_k = (F_k - P_k) / G_k in [0, 1].
+    force_of: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    lower: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Activations minimising sum_k a_k^2 with lower <= a <= 1 and R^T F(a) = tau, exactly.
 
-    A QP in activation space with the force model linearised at the current fibre state:
-    F = P + G a.  moment_arm (T, m, n) m; torque (T, n) N m; floor P and gain G (T, m) N;
-    ``minimum`` (T, m) N optional lower bound on F (co-contraction).  Returns F (T, m) N;
-    where the torques are out of reach, the closest reachable ones (the activation solve then
-    reports the gap).
+    moment_arm R (T, m, n) m; torque tau (T, n) N m; ``force_of(a)`` the tendon forces (T, m)
+    N at activations a (T, m) (fixed fibre state, increasing in a); ``lower`` (T, m) the
+    co-contraction floor.  F(a) is linearised at the current a and the box QP solved again
+    until a stops changing (sequential quadratic programming with the objective's Hessian;
+    its fixed point satisfies the KKT conditions of the nonlinear problem).  Torques out of
+    reach are replaced by the closest reachable ones: returns a (T, m) and the torques the
+    muscles produce (T, n), equal to ``torque`` wherever it is reachable.
     """
-    g = np.maximum(gain, 1e-12)
-    lo = np.zeros_like(floor)
-    if minimum is not None:
-        lo = np.clip((minimum - floor) / g, 0.0, 1.0)
-    a_mat = np.einsum("tmn,tm->tnm", moment_arm, g)
-    b = torque - np.einsum("tmn,tm->tn", moment_arm, floor)
-    x, _ = box_qp(a_mat, b, lo, np.ones_like(lo))
-    return floor + g * x
+    ones = np.ones_like(lower)
+    f_lo, f_hi = force_of(lower), force_of(ones)
+    gain = np.maximum(f_hi - f_lo, 0.0)
+    # reachable torques: forces anywhere in [F(lower), F(1)] (F is monotone in a)
+    a_mat = np.einsum("tmn,tm->tnm", moment_arm, gain)
+    x, resid = box_qp(
+        a_mat, torque - np.einsum("tmn,tm->tn", moment_arm, f_lo), np.zeros_like(lower), ones
+    )
+    target = np.where(np.abs(resid) > FEASIBILITY_TOL, torque + resid, torque)
+    a = lower + x * (1.0 - lower)  # start from the linear interpolation
+    step = 1e-7
+    for _ in range(SQP_STEPS):
+        f = force_of(a)
+        up, down = np.minimum(a + step, 1.0), np.maximum(a - step, 0.0)
+        slope = np.maximum((force_of(up) - force_of(down)) / (up - down), 0.0)
+        a_mat = np.einsum("tmn,tm->tnm", moment_arm, slope)
+        rhs = target - np.einsum("tmn,tm->tn", moment_arm, f - slope * a)
+        new, _ = box_qp(a_mat, rhs, lower, ones)
+        change = np.abs(new - a).max()
+        a = new
+        if change <= ACTIVATION_TOL:
+            break
+    return a, np.einsum("tmn,tm->tn", moment_arm, force_of(a))

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -25,6 +28,9 @@ def test_arm_pipeline_stores_conditions_and_renders(tmp_path: Path) -> None:
     direct = solve_arm(cfg.muscles.resolved()["load_1kg"])
     np.testing.assert_array_equal(stored.activation, direct.activation)
     assert abs(stored.torque_residual).max() < 1e-6
+    summary = store.open("muscles").attrs["summary"]
+    assert summary["feasible"] is True and summary["infeasible"] == {}
+    assert "warnings" not in summary
 
     files = Path(store.open("arm_render").store.root) / "files"
     video = cv2.VideoCapture(str(files / "free" / "arm.mp4"))
@@ -39,3 +45,28 @@ def test_arm_pipeline_stores_conditions_and_renders(tmp_path: Path) -> None:
     cfg, _ = load_config(ARM.config_model(), [ARM.default_config], sets)
     plan = make_plan(ARM, cfg, store)
     assert [e.action for e in plan] == ["cached", "run"]
+
+
+def test_cli_warns_of_torque_the_muscles_cannot_produce(tmp_path: Path) -> None:
+    """5 kg in the hand: the CLI names condition, joint, time span and missing torque, and
+    the stored summary flags it."""
+    root = Path(__file__).resolve().parents[2]
+    run = subprocess.run(
+        [sys.executable, "-m", "physanim", "run", "-p", "arm", "--local", "--only", "muscles"]
+        + ["--set", f"dataset.dir={tmp_path}", "--set", "muscles.base.motion.sample_rate=50"]
+        + ["--set", "muscles.conditions.load_1kg.arm.load_mass=5.0"],
+        cwd=root,
+        env={**os.environ, "COLUMNS": "200"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+    warnings = [ln for ln in run.stderr.splitlines() if ln.startswith("warning:")]  # console
+    assert warnings and all("'load_1kg'" in w for w in warnings)
+    assert any(
+        "J1 (forearm) from 280 to 600 ms; up to 5.50 N m of flexion missing" in w for w in warnings
+    ), warnings
+    assert any("J0 (upper_arm)" in w and "15.42 N m" in w for w in warnings), warnings
+    summary = StageStore(tmp_path / "runs" / "store.zarr").open("muscles").attrs["summary"]
+    assert summary["feasible"] is False and set(summary["infeasible"]) == {"load_1kg"}

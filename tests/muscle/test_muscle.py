@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.optimize import minimize
 
 from flows.dags import ARM
 from physanim.config import load_config
 from physanim.dynamics import inverse_dynamics
 from physanim.muscle import curves
 from physanim.muscle.activation import MuscleConstants, fibre_state, tendon_force_at
-from physanim.muscle.arm import solve_arm
+from physanim.muscle.arm import solve_arm, torque_shortfalls
 from physanim.muscle.geometry import arm_figure, muscle_paths
 from physanim.muscle.params import ArmParams, ArmStudyParams, ModelParams
 from physanim.muscle.shape import (
@@ -20,7 +21,7 @@ from physanim.muscle.shape import (
     spindle_semi_axes,
     spindle_volume,
 )
-from physanim.muscle.sharing import box_qp
+from physanim.muscle.sharing import box_qp, static_optimisation
 from physanim.muscle.trajectory import seed_trajectory
 
 
@@ -162,12 +163,101 @@ def test_physics_direction(results):
     loaded = results[("load_1kg", "seed_rule")].activation[:, 2]
     assert loaded.max() > free.max() + 0.2  # elbow flexor works harder with 1 kg in the hand
     tensed = results[("tensed", "static_optimisation")].activation
-    assert tensed.min() >= 0.09  # co-contraction: every muscle stays active
+    assert tensed.min() == pytest.approx(0.1, abs=1e-12)  # the floor holds on what is reported
+    assert results[("tensed", "seed_rule")].activation.min() >= 0.1 - 1e-9  # fixed-point tol
     assert results[("free", "static_optimisation")].activation[:, 1].max() < 1e-9
     for c in ("free", "load_1kg", "tensed"):
         so = np.sum(results[(c, "static_optimisation")].activation ** 2)
         rule = np.sum(results[(c, "seed_rule")].activation ** 2)
         assert so <= rule * (1 + 1e-9)
+
+
+def _force_of(s, res):
+    """F(a) (T, m) N at the result's final fibre state (what its activations were solved on)."""
+    mc = MuscleConstants.from_arm(s.arm)
+    state = fibre_state(res.musculotendon_length, res.force, mc)
+    return lambda a: tendon_force_at(a, state, res.fibre_velocity, mc, s.model)
+
+
+def _slsqp(r, tau, force_of, lower, start):
+    """One sample by a general constrained optimiser: min sum a^2, R^T F(a) = tau, a in box."""
+
+    def torque(a):
+        return r.T @ force_of(a[None])[0]
+
+    out = minimize(
+        lambda a: a @ a,
+        start,
+        jac=lambda a: 2 * a,
+        method="SLSQP",
+        bounds=[(lo, 1.0) for lo in lower],
+        constraints={"type": "eq", "fun": lambda a: torque(a) - tau},
+        options={"ftol": 1e-14, "maxiter": 500},
+    )
+    assert out.success, out.message
+    return out.x
+
+
+@pytest.mark.parametrize("condition", ["free", "load_1kg", "tensed"])
+def test_static_optimisation_matches_a_general_optimiser(results, condition):
+    s = study(condition)
+    res = results[(condition, "static_optimisation")]
+    force_of = _force_of(s, res)
+    lower = np.full(4, s.model.co_contraction)
+    for t in (5, 39, 62, 75, 95):
+        one = lambda a, t=t: force_of(np.broadcast_to(a, res.force.shape))[t : t + 1]  # noqa: E731
+        ref = _slsqp(res.moment_arm[t], res.torque[t], one, lower, np.full(4, 0.5))
+        np.testing.assert_allclose(res.activation[t], ref, atol=2e-6)
+    # tensed: the floor changes the solution (seed's linearised floor: extensor 0.134)
+    if condition == "tensed":
+        assert res.activation[39, 3] == pytest.approx(0.245, abs=1e-3)
+
+
+def test_infeasible_load_is_reported_without_co_contraction():
+    s = study("load_1kg")
+    heavy = s.model_copy(update={"arm": s.arm.model_copy(update={"load_mass": 5.0})})
+    res = solve_arm(heavy)
+    gaps = torque_shortfalls(res, ["shoulder", "elbow"])
+    elbow = [g for g in gaps if g.joint == "elbow" and g.peak_Nm > 0]
+    assert elbow and max(g.peak_Nm for g in elbow) > 5.0  # N m of flexion missing
+    shoulder = max(g.peak_Nm for g in gaps if g.joint == "shoulder")
+    assert shoulder == pytest.approx(np.abs(res.torque_residual[:, 0]).max())
+    assert shoulder == pytest.approx(15.4, abs=0.1)
+    short = res.torque_residual[:, 1] > 1e-6  # elbow short of flexion
+    assert res.activation[short, 2].min() == pytest.approx(1.0, abs=1e-12)  # flexor saturated
+    assert res.activation[short, 3].max() == 0.0  # ... and the extensor at rest
+    # the residual is the least the muscles can miss: a general optimiser cannot do better
+    force_of = _force_of(heavy, res)
+    for t in np.flatnonzero(short)[::15]:
+        one = lambda a, t=t: force_of(np.broadcast_to(a, res.force.shape))[t : t + 1]  # noqa: E731
+
+        def miss(a, t=t, one=one):
+            return np.sum((res.torque[t] - res.moment_arm[t].T @ one(a[None])[0]) ** 2)
+
+        ref = minimize(miss, np.full(4, 0.5), bounds=[(0, 1)] * 4, method="trust-constr")
+        assert miss(res.activation[t]) <= ref.fun + 1e-6
+
+
+def test_box_qp_out_of_reach_takes_the_smallest_closest_point():
+    """Row 1 cannot reach 5 (x0 <= 1); row 2 is met by any x1 = x2: take x1 = x2 = 0."""
+    a = np.array([[[1.0, 0.0, 0.0], [0.0, 1.0, -1.0]]])
+    x, resid = box_qp(a, np.array([[5.0, 0.0]]), np.zeros((1, 3)), np.ones((1, 3)))
+    np.testing.assert_allclose(x, [[1.0, 0.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(resid, [[-4.0, 0.0]], atol=1e-12)
+
+
+def test_static_optimisation_is_exact_for_a_nonlinear_force():
+    """F(a) = 10 a^2 per muscle, two antagonists on one joint: the optimum is analytic."""
+    r = np.array([[[0.05], [-0.02]]])  # (T, m, n) m
+
+    def force_of(a):
+        return 10.0 * a**2
+
+    a, produced = static_optimisation(r, np.array([[0.2]]), force_of, np.full((1, 2), 0.1))
+    # extensor at its floor 0.1 pulls 0.02 * 0.1 N m: the flexor covers the rest
+    flexor = np.sqrt((0.2 + 0.02 * 10 * 0.01) / (0.05 * 10))
+    np.testing.assert_allclose(a, [[flexor, 0.1]], atol=1e-12)
+    np.testing.assert_allclose(produced, [[0.2]], atol=1e-12)
 
 
 def test_static_optimisation_beats_an_alternative_split():
