@@ -23,7 +23,7 @@ class KeyframeRenderParams(BaseModel):
 def compute(ctx: StageContext) -> None:
     """Render the upstream animation into this output's files/."""
     from physanim.dynamics import Figure
-    from physanim.dynamics.keyframes import KeyframeSpec, environment
+    from physanim.dynamics.keyframes import KeyframeSpec, environment, root_path
     from physanim.render.figure import render_animation
 
     params: KeyframeRenderParams = ctx.params  # type: ignore[assignment]
@@ -36,6 +36,10 @@ def compute(ctx: StageContext) -> None:
     missing = [n for n in params.trail_links if n not in fig.joint_names]
     if missing:
         raise ValueError(f"keyframe_render.trail_links: {missing} are not links of {fig.name}")
+    guides = None
+    if spec.path is not None:  # the path the base follows (its sampled positions)
+        path, _ = root_path(spec)
+        guides = {"root path": path.positions}
     written = render_animation(
         fig,
         anim["q"][...],
@@ -45,6 +49,7 @@ def compute(ctx: StageContext) -> None:
         env=environment(spec),
         trail_links=params.trail_links,
         com=anim["placement/com"][...] if params.com_trail else None,
+        guides=guides,
         simulated=anim["simulated"][...],
         key_times=[k.frame / spec.fps for k in spec.keys],
         title=spec.name,

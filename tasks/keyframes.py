@@ -49,6 +49,8 @@ def fingerprint(_dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]
 
 def compute(ctx: StageContext) -> None:
     """Animate; arrays q, qd (F, n) rad, simulated mask, placement (base_pos, com, ...)."""
+    import numpy as np
+
     from physanim.dynamics import Figure
     from physanim.dynamics.keyframes import KeyframeSpec, run_keyframes
 
@@ -68,6 +70,10 @@ def compute(ctx: StageContext) -> None:
         min_clearance_mm=round(float(result.placement.distance.min()) * 1e3, 3),
         airborne_frames=[int(i) for i in (~contact).nonzero()[0]],
     )
+    if spec.path is not None:
+        steps = np.diff(result.placement.base_pos[:, [0, 2]], axis=0)
+        ctx.summary["path_length_m"] = round(float(np.linalg.norm(steps, axis=1).sum()), 4)
+        ctx.summary["path_spacing"] = spec.path.spacing
 
 
 SPEC = StageSpec(

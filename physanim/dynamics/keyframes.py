@@ -2,7 +2,9 @@
 
 A keyframe file (YAML, schema :class:`KeyframeSpec`) gives key frames with joint angles
 (and optional velocities), the intervals and sub-structures to simulate passively,
-per-joint friction factors (per frame) and world constraints.  Unsimulated joints are
+per-joint friction factors (per frame), world constraints and optionally a root path: the
+base follows a natural cubic spline through given points, one sample per frame placed by a
+spacing rule (seed 002), and a heading joint can turn the figure along it.  Unsimulated joints are
 interpolated (quadratic from theta_1, theta'_1, theta_2, or cubic Hermite); a simulated
 interval starts from the interpolated state and hands its end state to a cubic Hermite
 segment towards the next key.  Missing key velocities default to central differences.
@@ -24,7 +26,7 @@ from physanim.dynamics.figure import Figure
 from physanim.dynamics.interpolation import catmull_rom_velocities, evaluate, hermite, quadratic
 from physanim.dynamics.params import KeyframeParams
 from physanim.dynamics.passive import passive_step
-from physanim.dynamics.placement import Placement, WorldConstraint, place_in_world
+from physanim.dynamics.placement import Placement, RootPath, WorldConstraint, place_in_world
 
 Vec3 = tuple[float, float, float]
 
@@ -96,6 +98,38 @@ class WorldSpec(BaseModel):
     constraints: list[ConstraintSpec] = Field(default_factory=list)
 
 
+class PathSpec(BaseModel):
+    """Root path (seed 002): between keys ``from_key`` and ``to_key`` the base (pelvis
+    centre) follows the natural cubic spline through ``points``, one sample per frame."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    points: list[Vec3] = Field(min_length=3, description="Spline data points (world), m.")
+    spacing: Literal["uniform", "arc", "curvature"] | list[float] = Field(
+        default="arc",
+        description="Timing: 'uniform' (equal spline-parameter steps), 'arc' (constant "
+        "speed), 'curvature' (equal curvature integral: slow in bends) or one relative "
+        "distance per frame step (frames - 1 numbers >= 0).",
+    )
+    from_key: int = Field(default=0, ge=0, description="Index of the key where the path starts.")
+    to_key: int | None = Field(default=None, ge=1, description="Key where it ends (last: None).")
+    on_ground: bool = Field(
+        default=True,
+        description="Lift the base each frame until the lowest capsule touches the ground or "
+        "a platform (the points' heights are then ignored).",
+    )
+    heading_joint: str | None = Field(
+        default=None,
+        description="Joint about world +y (e.g. pelvis_y) that turns the figure to face along "
+        "the path; the keys' angles for it are added to the heading.",
+    )
+    extra_point: Literal["reflect", "none"] = Field(
+        default="reflect",
+        description="'reflect': an extra point past the end keeps the last sample from drifting "
+        "(seed 002); 'none': the plain natural spline.",
+    )
+
+
 class KeyframeSpec(BaseModel):
     """Keyframe file schema."""
 
@@ -113,6 +147,14 @@ class KeyframeSpec(BaseModel):
         description="Velocity factor per frame in [0, 1] by joint name; 'default' for the rest.",
     )
     world: WorldSpec = Field(default_factory=WorldSpec)
+    path: PathSpec | None = Field(default=None, description="Root path of the base (optional).")
+
+    def path_keys(self) -> tuple[int, int]:
+        """(from_key, to_key) of the root path; to_key defaults to the last key."""
+        if self.path is None:
+            raise ValueError("the keyframe file has no 'path'")
+        last = len(self.keys) - 1 if self.path.to_key is None else self.path.to_key
+        return self.path.from_key, last
 
     @model_validator(mode="after")
     def _check(self) -> KeyframeSpec:
@@ -129,7 +171,33 @@ class KeyframeSpec(BaseModel):
         for name, f in self.friction.items():
             if not 0.0 <= f <= 1.0:
                 raise ValueError(f"friction[{name!r}] = {f} is outside [0, 1]")
+        if self.path is not None:
+            self._check_path()
         return self
+
+    def _check_path(self) -> None:
+        first, last = self.path_keys()
+        if not first < last < len(self.keys):
+            raise ValueError(
+                f"path: need from_key < to_key < {len(self.keys)} (number of keys), "
+                f"got {first}..{last}"
+            )
+        f0, f1 = self.keys[first].frame, self.keys[last].frame
+        spacing = self.path.spacing if self.path is not None else "arc"
+        if not isinstance(spacing, str) and (
+            len(spacing) != f1 - f0 or min(spacing) < 0 or sum(spacing) <= 0
+        ):
+            raise ValueError(
+                f"path.spacing: give {f1 - f0} relative distances >= 0 (one per frame step "
+                f"from frame {f0} to {f1}), got {len(spacing)}"
+            )
+        for i, c in enumerate(self.world.constraints):
+            a, b = self.keys[c.from_key].frame, self.keys[c.to_key].frame
+            if a < f1 and f0 < b:
+                raise ValueError(
+                    f"world.constraints[{i}] (frames {a}..{b}) overlaps the path (frames "
+                    f"{f0}..{f1}); the path places the base there: drop one or shift it"
+                )
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> KeyframeSpec:
@@ -280,6 +348,56 @@ def environment(spec: KeyframeSpec) -> Environment:
     return Environment(ground_height=w.ground_height, boxes=boxes)
 
 
+def root_path(spec: KeyframeSpec) -> tuple[RootPath, np.ndarray]:
+    """The file's root path as per-frame base positions, and the heading (k,) rad about +y
+    (0 faces +z) of the path's tangent at those frames, unwrapped."""
+    from physanim.spline import path_samples
+
+    path = spec.path
+    if path is None:
+        raise ValueError("the keyframe file has no 'path'")
+    first, last = spec.path_keys()
+    f0, f1 = spec.keys[first].frame, spec.keys[last].frame
+    spline, t = path_samples(
+        np.asarray(path.points, float),
+        f1 - f0 + 1,
+        path.spacing,
+        extra_point=None if path.extra_point == "none" else path.extra_point,
+    )
+    tangent = spline(t, 1)
+    heading = np.unwrap(np.arctan2(tangent[:, 0], tangent[:, 2]))
+    return RootPath(f0, spline(t), path.on_ground), heading
+
+
+def _turn_along_path(
+    fig: Figure,
+    spec: KeyframeSpec,
+    q: np.ndarray,
+    qd: np.ndarray,
+    simulated: np.ndarray,
+    path: RootPath,
+    heading: np.ndarray,
+) -> None:
+    """Add the heading (held before and after the path) to the heading joint, in place."""
+    name = spec.path.heading_joint if spec.path is not None else None
+    if name is None:
+        return
+    j = _joint(fig, name, "path.heading_joint")
+    if simulated[:, j].any():
+        raise ValueError(
+            f"path.heading_joint: {name!r} is simulated; it cannot also follow the path"
+        )
+    first = path.first_frame
+    full = np.empty(len(q))
+    full[:first] = heading[0]
+    full[first : first + len(heading)] = heading
+    full[first + len(heading) :] = heading[-1]
+    rate = np.zeros(len(q))
+    rate[first : first + len(heading)] = np.gradient(heading, 1.0 / spec.fps)
+    q[:, j] += full
+    qd[:, j] += rate
+
+
 def run_keyframes(
     fig: Figure,
     spec: KeyframeSpec,
@@ -292,6 +410,10 @@ def run_keyframes(
     q, qd, simulated = animate_joints(
         fig, spec, substeps=p.substeps, method=p.method, progress=progress
     )
+    path = None
+    if spec.path is not None:
+        path, heading = root_path(spec)
+        _turn_along_path(fig, spec, q, qd, simulated, path, heading)
     start = spec.world.start
     placement = place_in_world(
         fig,
@@ -302,6 +424,7 @@ def run_keyframes(
         start_position=np.asarray(start.position, float),
         start_joint=-1 if start.joint is None else _joint(fig, start.joint, "world.start"),
         gravity=spec.world.gravity,
+        root_path=path,
         params=p,
     )
     return KeyframeResult(np.arange(len(q)) / spec.fps, q, qd, simulated, placement)

@@ -4,7 +4,9 @@ Two constraints govern the base position frame by frame: ``pin`` keeps one joint
 in the world; ``gravity`` moves the centre of mass ballistically and handles contact:
 touching -> still touching pins the designated joint; touching -> free takes off; free
 -> penetrating slides the COM back along its path to the first touching position and
-pins the designated joint (or the joint nearest the contact) from then on.
+pins the designated joint (or the joint nearest the contact) from then on.  A root path
+(seed 002) instead prescribes the base position over a run of frames, optionally lifted
+onto the ground so that the lowest capsule touches it.
 """
 
 from __future__ import annotations
@@ -36,6 +38,21 @@ class WorldConstraint:
 
 
 @dataclass(frozen=True)
+class RootPath:
+    """Base positions ``positions`` (k, 3) m for frames first_frame .. first_frame + k - 1;
+    ``on_ground``: move each frame's base along "up" until the figure's lowest capsule
+    touches the environment (the positions' heights are then ignored)."""
+
+    first_frame: int
+    positions: np.ndarray
+    on_ground: bool = True
+
+    def covers(self, frame: int) -> bool:
+        """Whether ``frame`` lies on the path."""
+        return self.first_frame <= frame < self.first_frame + len(self.positions)
+
+
+@dataclass(frozen=True)
 class Placement:
     """Per-frame world placement: ``base_pos`` (F, 3) m, ``com`` (F, 3) m, ``contact``
     (F,) bool, ``pinned`` (F,) joint index (-1 none) and ``distance`` (F,) m, the
@@ -58,13 +75,15 @@ def place_in_world(
     start_position: np.ndarray,
     start_joint: int = -1,
     gravity: np.ndarray | tuple[float, float, float] = (0.0, -9.81, 0.0),
+    root_path: RootPath | None = None,
     params: KeyframeParams | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> Placement:
     """Base positions for joint angles q (F, n) rad sampled at ``fps`` frames/s.
 
-    Frame 0 puts joint ``start_joint`` (or the base, if -1) at ``start_position`` (3,) m.
-    Steps without a constraint keep the base where it is.
+    Frame 0 puts joint ``start_joint`` (or the base, if -1) at ``start_position`` (3,) m,
+    unless ``root_path`` covers it.  Frames on the root path take its positions (no
+    constraint may act there); other steps without a constraint keep the base where it is.
     """
     params = params or KeyframeParams()
     tol = params.contact_tolerance
@@ -81,8 +100,14 @@ def place_in_world(
     def gap(f: int, base: np.ndarray) -> tuple[float, np.ndarray]:
         return environment_distance(env, seg_a[f] + base, seg_b[f] + base, radius)
 
+    def on_path(f: int, path: RootPath) -> np.ndarray:
+        p = np.asarray(path.positions[f - path.first_frame], float)
+        return p - gap(f, p)[0] * _up_of(g) if path.on_ground else p
+
     base = np.zeros((nf, 3))
     base[0] = np.asarray(start_position, float) - (rel[0, start_joint] if start_joint >= 0 else 0)
+    if root_path is not None and root_path.covers(0):
+        base[0] = on_path(0, root_path)
     contact = np.zeros(nf, dtype=bool)
     pinned = np.full(nf, -1)
     distance = np.zeros(nf)
@@ -104,7 +129,9 @@ def place_in_world(
                     joint = _nearest_joint(rel[c] + base[c], point)
                 pinned[c] = joint
                 pin_point = base[c] + rel[c, joint]
-        if cons is None:
+        if root_path is not None and root_path.covers(d):
+            base[d] = on_path(d, root_path)
+        elif cons is None:
             base[d] = base[c]
         elif cons.kind == "pin":
             pinned[d] = pinned[c]

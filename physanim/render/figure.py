@@ -55,6 +55,7 @@ def render_frames(
     *,
     env: Environment | None = None,
     trails: Mapping[str, np.ndarray] | None = None,
+    guides: Mapping[str, np.ndarray] | None = None,
     azimuth: float = 60.0,
     elevation: float = 15.0,
     size_px: tuple[int, int] = (640, 480),
@@ -64,7 +65,8 @@ def render_frames(
     """Draw every frame to ``out_dir/frame_0000.png``...; returns the paths.
 
     q (F, n) rad; base_pos (F, 3) m; ``trails`` maps a label to a point path (F, 3) m
-    drawn up to the current frame (e.g. a hand tip or the centre of mass).
+    drawn up to the current frame (e.g. a hand tip or the centre of mass); ``guides`` maps
+    a label to a polyline (k, 3) m drawn whole, dashed, in every frame (e.g. a root path).
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -72,7 +74,8 @@ def render_frames(
     kin = forward_kinematics(fig, q, base_pos=np.asarray(base_pos, float))
     seg_a, seg_b = capsule_segments(fig, kin)
     solid = np.flatnonzero(fig.radius > 0)
-    pts = np.concatenate([seg_a.reshape(-1, 3), seg_b.reshape(-1, 3)]) @ basis.T
+    guide_pts = [np.asarray(g, float) for g in (guides or {}).values()]
+    pts = np.concatenate([seg_a.reshape(-1, 3), seg_b.reshape(-1, 3), *guide_pts]) @ basis.T
     pad = 0.4
     xlim = (pts[:, 0].min() - pad, pts[:, 0].max() + pad)
     ylim = (min(pts[:, 1].min(), 0.0) - pad, pts[:, 1].max() + pad)
@@ -105,12 +108,15 @@ def render_frames(
         for z, i in enumerate(order):
             outline = stadium(a2[i, :2], b2[i, :2], fig.radius[solid[i]])
             ax.add_patch(Polygon(outline, closed=True, fc=colors[i], ec="k", lw=0.6, zorder=2 + z))
+        for label, line in (guides or {}).items():
+            p2 = np.asarray(line) @ basis[:2].T
+            ax.plot(p2[:, 0], p2[:, 1], "--", lw=1, color="0.35", label=label, zorder=1)
         for k, (label, path) in enumerate((trails or {}).items()):
             p2 = np.asarray(path)[: f + 1] @ basis[:2].T
             ax.plot(
                 p2[:, 0], p2[:, 1], "-o", ms=2, lw=1, color=f"C{k + 2}", label=label, zorder=100
             )
-        if trails:
+        if trails or guides:
             ax.legend(loc="upper right", fontsize=7)
         path = out_dir / f"frame_{f:04d}.png"
         fg.savefig(path, dpi=dpi)
@@ -148,6 +154,7 @@ def plot_joint_angles(
     joints: Sequence[str] | None = None,
     simulated: np.ndarray | None = None,
     key_times: Sequence[float] = (),
+    title: str = "",
 ) -> Path:
     """Plot joint angles (deg) over time (s); simulated stretches (F, n) drawn bold,
     key times as vertical lines.  ``joints`` selects the curves (default: those that move)."""
@@ -168,6 +175,7 @@ def plot_joint_angles(
         ax.axvline(t, color="k", lw=0.5, ls="--")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("joint angle (deg)")
+    ax.set_title(f"{title + ': ' if title else ''}joint angles (bold: simulated; dashed: keys)")
     ax.legend(fontsize=6, ncol=3, loc="best")
     ax.grid(alpha=0.3)
     fg.tight_layout()
@@ -185,6 +193,7 @@ def render_animation(
     env: Environment | None = None,
     trail_links: Sequence[str] = (),
     com: np.ndarray | None = None,
+    guides: Mapping[str, np.ndarray] | None = None,
     simulated: np.ndarray | None = None,
     key_times: Sequence[float] = (),
     title: str = "",
@@ -195,7 +204,8 @@ def render_animation(
     """PNG frames (``out_dir/frames/``), ``animation.mp4`` and ``joint_angles.png``.
 
     q (F, n) rad and base_pos (F, 3) m at ``fps``; trails of the distal ends of
-    ``trail_links`` and of ``com`` (F, 3) m if given.  Returns the written paths.
+    ``trail_links`` and of ``com`` (F, 3) m if given; ``guides`` as in :func:`render_frames`.
+    Returns the written paths.
     """
     out_dir = Path(out_dir)
     kin = forward_kinematics(fig, q, base_pos=np.asarray(base_pos, float))
@@ -210,6 +220,7 @@ def render_animation(
         out_dir / "frames",
         env=env,
         trails=trails,
+        guides=guides,
         azimuth=azimuth,
         elevation=elevation,
         title=title,
@@ -226,5 +237,6 @@ def render_animation(
             out_dir / "joint_angles.png",
             simulated=simulated,
             key_times=key_times,
+            title=title,
         ),
     }

@@ -1,7 +1,7 @@
 """Natural cubic splines and sample placement by spacing rules (seed 002)."""
 
 from physanim.spline.cubic import Spline, natural_spline
-from physanim.spline.motion import path_positions
+from physanim.spline.motion import path_positions, path_samples
 from physanim.spline.sampling import (
     equal_arc,
     equal_curvature,
@@ -18,6 +18,7 @@ __all__ = [
     "from_increments",
     "natural_spline",
     "path_positions",
+    "path_samples",
     "place",
     "sample",
     "uniform_parameter",

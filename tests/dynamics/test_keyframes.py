@@ -7,6 +7,7 @@ from physanim.dynamics import capsule_segments, forward_kinematics
 from physanim.dynamics.contact import capsule_box_distance, capsule_plane_distance
 from physanim.dynamics.interpolation import evaluate, hermite, quadratic
 from physanim.dynamics.keyframes import KeyframeSpec, animate_joints, run_keyframes
+from physanim.spline import natural_spline
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
@@ -120,3 +121,90 @@ def test_keyframe_file_errors(tmp_path):
         KeyframeSpec.from_yaml(bad)
     with pytest.raises(FileNotFoundError):
         KeyframeSpec.from_yaml(tmp_path / "missing.yaml")
+
+
+@pytest.fixture(scope="module")
+def walk_spec():
+    return KeyframeSpec.from_yaml(CONFIGS / "keyframes" / "walk.yaml")
+
+
+def _with_path(spec, **changes):
+    return spec.model_copy(update={"path": spec.path.model_copy(update=changes)})
+
+
+@pytest.mark.parametrize("spacing", ["uniform", "arc", "curvature", "ease"])
+def test_root_path_follows_the_spline_by_its_spacing_rule(human, walk_spec, spacing):
+    rule = 0.5 - 0.5 * np.cos(np.linspace(0, 2 * np.pi, 49)[1:]) if spacing == "ease" else spacing
+    spec = _with_path(walk_spec, spacing=rule if isinstance(rule, str) else list(rule))
+    spec = _with_path(spec, on_ground=False)
+    res = run_keyframes(human, spec)
+    points = np.array(spec.path.points)
+    base = res.placement.base_pos
+    np.testing.assert_array_equal(base[0], points[0])
+    np.testing.assert_allclose(base[-1], points[-1], atol=1e-12)  # no drift at the end
+    sp = natural_spline(points, extra_point="reflect")
+    s = sp.arc_length(_params_of(sp, base))
+    steps = np.diff(s)
+    if spacing == "arc":
+        np.testing.assert_allclose(steps, sp.length / 48, rtol=1e-9)
+    elif spacing == "uniform":
+        np.testing.assert_allclose(np.diff(_params_of(sp, base)), sp.t_end / 48, rtol=1e-9)
+    elif spacing == "curvature":
+        q = sp.curvature(_params_of(sp, base))
+        np.testing.assert_allclose(np.diff(q), q[-1] / 48, rtol=1e-8)
+    else:
+        np.testing.assert_allclose(steps / sp.length, rule / rule.sum(), atol=1e-9)
+
+
+def _params_of(sp, base):
+    """Spline parameters of points on the path (nearest of a fine grid, then Newton)."""
+    grid = np.linspace(0, sp.t_end, 20001)
+    t = grid[np.argmin(np.linalg.norm(sp(grid)[None] - base[:, None], axis=-1), axis=1)]
+    for _ in range(20):
+        d, v, a = sp(t) - base, sp(t, 1), sp(t, 2)
+        t = t - np.einsum("ij,ij->i", d, v) / (
+            np.einsum("ij,ij->i", v, v) + np.einsum("ij,ij->i", d, a)
+        )
+    np.testing.assert_allclose(sp(t), base, atol=1e-12)
+    return t
+
+
+def test_walk_turns_along_the_path_and_keeps_a_foot_on_the_ground(human, walk_spec):
+    res = run_keyframes(human, walk_spec)
+    p = res.placement
+    np.testing.assert_allclose(p.distance, 0.0, atol=1e-12)  # the lowest capsule touches
+    np.testing.assert_allclose(p.base_pos[-1, [0, 2]], walk_spec.path.points[-1][::2], atol=1e-12)
+    # the pelvis faces along the path: its +z axis is the path's horizontal tangent
+    kin = forward_kinematics(human, res.q, base_pos=p.base_pos)
+    facing = kin.rotations[:, human.index("pelvis_z")] @ np.array([0.0, 0.0, 1.0])
+    sp = natural_spline(np.array(walk_spec.path.points), extra_point="reflect")
+    tangent = sp(_params_of(sp, p.base_pos * [1, 0, 1]), 1)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    np.testing.assert_allclose(facing, tangent, atol=1e-9)
+    # heading rate: the joint velocity includes the turn
+    j = human.index("pelvis_y")
+    np.testing.assert_allclose(res.qd[1:-1, j], np.gradient(res.q[:, j], 1 / 30)[1:-1], atol=0.05)
+    speed = np.linalg.norm(np.diff(p.base_pos[:, [0, 2]], axis=0), axis=1) * 30
+    assert 1.0 < speed.min() and speed.max() / speed.min() < 1.01  # about 1.1 m/s, constant
+
+
+def test_root_path_errors(walk_spec, tmp_path):
+    with pytest.raises(ValueError, match="path.spacing: give 48"):
+        KeyframeSpec.model_validate(
+            {
+                **walk_spec.model_dump(),
+                "path": {**walk_spec.path.model_dump(), "spacing": [1.0, 2.0]},
+            }
+        )
+    bad = {
+        **walk_spec.model_dump(),
+        "world": {
+            "constraints": [{"type": "pin", "joint": "r_ankle_x", "from_key": 4, "to_key": 6}]
+        },
+    }
+    with pytest.raises(ValueError, match=r"constraints\[0\] \(frames 32..48\) overlaps the path"):
+        KeyframeSpec.model_validate(bad)
+    with pytest.raises(ValueError, match="from_key < to_key"):
+        KeyframeSpec.model_validate(
+            {**walk_spec.model_dump(), "path": {**walk_spec.path.model_dump(), "from_key": 6}}
+        )
