@@ -81,3 +81,11 @@ def plot_demo(out_dir: str | Path) -> dict[str, Path]:
         paths[key] = out / f"{key}.png"
         fg.savefig(paths[key])
     return paths
+
+
+if __name__ == "__main__":
+    import sys
+
+    target = Path(sys.argv[1] if len(sys.argv) > 1 else "out/spline_demo")
+    for name, written in plot_demo(target).items():
+        print(f"{name}: {written}")
