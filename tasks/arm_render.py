@@ -58,7 +58,7 @@ SPEC = StageSpec(
     name="arm_render",
     upstream=("muscles",),
     params=ArmRenderParams,
-    version="1",
+    version="2",
     compute=compute,
     doc="arm frames + MP4 per condition, activation / fibre-length plots",
 )

@@ -64,7 +64,7 @@ SPEC = StageSpec(
     name="keyframe_render",
     upstream=("keyframes",),
     params=KeyframeRenderParams,
-    version="1",
+    version="2",
     compute=compute,
     doc="capsule figure frames + MP4 + joint-angle plot",
 )

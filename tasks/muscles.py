@@ -68,7 +68,7 @@ SPEC = StageSpec(
     name="muscles",
     upstream=(),
     params=ArmConditions,
-    version="1",
+    version="2",
     compute=compute,
     doc="inverse dynamics, force sharing and Zajac activations per condition",
 )
