@@ -77,7 +77,14 @@ def track_markers_2d(
             f"the template's {k}; for a recording without painted markers set "
             "track.backend=markerless, else adjust track.marker_rgb / track.chroma_tolerance"
         )
-    match, _ = label_markers(template, dots, params.label_gate_px)
+    try:
+        match, _ = label_markers(template, dots, params.label_gate_px)
+    except ValueError:
+        raise TrackingError(
+            f"frame 0: cannot fit the marker template ({k} markers) to the {len(dots)} dots "
+            "found; for a recording without painted markers set track.backend=markerless, else "
+            "check track.template and track.marker_rgb"
+        ) from None
     estimate = np.full((k, 2), np.nan)
     estimate[match >= 0] = dots[match[match >= 0]]
     lk = dict(
