@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -48,38 +49,41 @@ def test_demo_is_reported_without_problems(demo_dir: Path) -> None:
     assert " of 6 frames" in found["face"]
 
 
-def test_cli_on_a_real_photo_dataset_and_a_broken_one(tmp_path: Path) -> None:
-    """The README's command, from the working directory with a relative dataset path."""
-    photo = skdata.astronaut()
-    write_photo_dataset(tmp_path / "data" / "me", photo)
-    write_photo_dataset(tmp_path / "data" / "coffee", skdata.coffee())
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    runs = {
-        name: subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "physanim",
-                "check",
-                f"data/{name}",
-                "--set",
-                "track.backend=markerless",
-            ],
-            cwd=tmp_path,
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )  # fmt: skip
-        for name in ("me", "coffee")
-    }
-    ok, bad = runs["me"], runs["coffee"]
+def test_cli_on_a_real_photo_dataset_and_a_broken_one() -> None:
+    """The README's command, from the repository root with a relative dataset path."""
+    rel = Path("data") / f"pytest-{os.getpid()}-check"
+    try:
+        write_photo_dataset(ROOT / rel / "me", skdata.astronaut())
+        write_photo_dataset(ROOT / rel / "coffee", skdata.coffee())
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        ok, bad = (
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "physanim",
+                    "check",
+                    f"{rel}/{name}",
+                    "--set",
+                    "track.backend=markerless",
+                ],
+                cwd=ROOT,
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=120,
+            )  # fmt: skip
+            for name in ("me", "coffee")
+        )
+    finally:
+        shutil.rmtree(ROOT / rel, ignore_errors=True)
     assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.startswith(f"{rel}/me:\n  source      Open3D RGBD folder {rel}/me")
     assert (
         "face        found in 4 of 4 frames" in ok.stdout and "ok: no problems found" in ok.stdout
     )
     assert bad.returncode == 1
-    assert "error: data/coffee: no face found in any of the 4 frames" in bad.stdout
+    assert f"error: {rel}/coffee: no face found in any of the 4 frames" in bad.stdout
     assert "Traceback" not in bad.stdout + bad.stderr
 
 
