@@ -104,7 +104,7 @@ class StereoCalibration:
         # (a blank line keeps the line numbers of parse errors right).
         text = re.sub(r"^%YAML.*$", "", path.read_text(errors="replace"), count=1, flags=re.M)
         try:
-            data = yaml.load(text, Loader=_CalibrationLoader)  # noqa: S506 (SafeLoader subclass)
+            data = yaml.load(text, Loader=_CalibrationLoader)  # a SafeLoader subclass
         except yaml.YAMLError as exc:
             where = getattr(exc, "problem_mark", None)
             at = f" at line {where.line + 1}, column {where.column + 1}" if where else ""

@@ -28,11 +28,11 @@ MAX_ROUGH_FRACTION = 0.3
 VALID_JUMP, MEDIAN_JUMP = 0.2, 0.25
 
 DEPTH_FIX = {
-    "rgbd": "set depth_scale (raw units per metre, e.g. 1000 for mm, 4000 for 0.25 mm) in "
-    "intrinsic.json, or ingest.rgbd_depth_scale",
+    "rgbd": "depth_scale wrong? set depth_scale (raw units per metre, e.g. 1000 for mm, 4000 "
+    "for 0.25 mm) in intrinsic.json, or ingest.rgbd_depth_scale",
     "bag": "the bag's depth unit is wrong or the subject is out of range; re-record with the "
     "face 0.2-2 m from the camera",
-    "stereo": "check the calibration: T in metres, K1/K2 in px of these images",
+    "stereo": "calibration wrong? T in metres, K1/K2 in px of these images",
 }
 
 
@@ -130,7 +130,7 @@ def check_capture(capture: Capture, params: IngestParams) -> tuple[list[Problem]
         )  # fmt: skip
         out.append(Problem("error", (
             f"{where}: the nearest surface at the image centre is {z:.2f} m away{scale}, not a "
-            f"face's {FACE_DISTANCE_M[0]:g}-{FACE_DISTANCE_M[1]:g} m: depth_scale wrong? {fix}"
+            f"face's {FACE_DISTANCE_M[0]:g}-{FACE_DISTANCE_M[1]:g} m: {fix}"
         )))  # fmt: skip
     bad = implausible_depth_frames(capture)
     if bad:
