@@ -316,6 +316,32 @@ def demo(
 
 
 @app.command()
+def check(
+    dataset: Annotated[str, typer.Argument(help="dataset name (data/<name>) or directory")],
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+) -> None:
+    """Read a dataset's recording and print what it holds, or each problem and its fix."""
+    from physanim.capture.check import check_dataset
+    from physanim.pipeline.progress import rich_progress
+
+    cfg = load(_pipeline("face"), config, set_, dataset)
+    path, track = cfg.dataset.path, cfg.track  # type: ignore[attr-defined]
+    with rich_progress(console) as progress:
+        report = check_dataset(
+            path,
+            cfg.ingest,
+            track,
+            path / track.template,
+            progress("reading " + str(path)),  # type: ignore[attr-defined]
+        )
+    print(f"{path}:")
+    for line in report.lines():
+        print(line)
+    raise typer.Exit(0 if report.ok else 1)
+
+
+@app.command()
 def sweep(
     file: Annotated[Path, typer.Argument(help="sweep YAML, e.g. configs/sweeps/models.yaml")],
     dask_address: Annotated[

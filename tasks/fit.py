@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from physanim.face.params import FitParams
 from physanim.pipeline import StageContext, StageSpec
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def compute(ctx: StageContext) -> None:
@@ -15,6 +20,7 @@ def compute(ctx: StageContext) -> None:
     tracked = ctx.input("track")
     names = list(tracked.attrs["names"])
     points, conf = tracked["points"][...], tracked["confidence"][...]
+    _check_tracked(points, conf, params)
     model = load_face_model()
     embedding = embed_landmarks(model, names, points, conf, params)
     result = fit_sequence(model, embedding, points, conf, params, progress=ctx.progress("fit"))
@@ -29,6 +35,29 @@ def compute(ctx: StageContext) -> None:
         rms_mm=round(float(result.rms.mean()) * 1e3, 3),
         max_rms_mm=round(float(result.rms.max()) * 1e3, 3),
     )
+
+
+def _check_tracked(points: np.ndarray, confidence: np.ndarray, params: FitParams) -> None:
+    """Refuse tracks (T, K, 3) m / (T, K) that cannot be fitted, saying why and what to do."""
+    import numpy as np
+
+    usable = np.isfinite(points).all(axis=2) & (confidence >= params.min_confidence)
+    per_frame = usable.sum(axis=1)
+    if not (per_frame >= 3).any():
+        raise ValueError(
+            f"no tracked points to fit: no frame of the track output has 3 landmarks with "
+            f"confidence >= fit.min_confidence={params.min_confidence} (most: "
+            f"{int(per_frame.max(initial=0))}); the tracker found no face: run "
+            "`physanim check DATASET`"
+        )
+    n = min(params.neutral_frames, len(points))
+    if usable[:n].any(axis=0).sum() < 3:
+        first = int(np.argmax(per_frame >= 3))
+        raise ValueError(
+            f"the neutral fit needs 3 tracked landmarks in the first fit.neutral_frames={n} "
+            f"frame(s); the face is first tracked at frame {first}: trim the recording to start "
+            "with the neutral face in view"
+        )
 
 
 SPEC = StageSpec(

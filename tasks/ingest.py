@@ -16,18 +16,19 @@ from physanim.pipeline import DatasetParams, ProgressFactory, StageContext, Stag
 
 
 def fingerprint(dataset: DatasetParams, params: BaseModel) -> Mapping[str, object]:
-    """Name, size and modification time of every file of the source that ingest will read.
+    """Name, size and modification time of exactly the files ingest will read
+    (``source_files``: never the run directory of a dataset-root layout).
 
     Size + mtime (not a content hash) keeps warm runs fast on recordings of many GB; an edited
     or regenerated recording changes them.
     """
-    from physanim.capture.ingest import find_source
+    from physanim.capture.ingest import find_source, source_files
 
     try:
         kind, path = find_source(dataset.path, params.source)  # type: ignore[attr-defined]
     except (FileNotFoundError, ValueError):
         return {"missing": str(dataset.path)}  # ingest itself reports what is missing
-    files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+    files = source_files(kind, path)
     return {
         "source": kind,
         "files": [
@@ -51,6 +52,8 @@ def compute(ctx: StageContext) -> None:
         dropped=capture.dropped,
         duplicated=capture.duplicated,
         recovered=capture.recovered,
+        implausible_depth_frames=capture.implausible_depth,
+        warnings=capture.warnings,
     )
 
 
@@ -58,7 +61,7 @@ SPEC = StageSpec(
     name="ingest",
     upstream=(),
     params=IngestParams,
-    version="1",
+    version="2",
     compute=compute,
     doc="RealSense bag / Open3D RGBD folder / stereo pair -> colour, metric depth, intrinsics",
     fingerprint=fingerprint,

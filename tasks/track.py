@@ -40,8 +40,14 @@ def fingerprint(dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]:
 
 
 def compute(ctx: StageContext) -> None:
-    """uv (T,K,2) px, points (T,K,3) m camera frame, confidence (T,K), head_pose (T,4,4)."""
+    """uv (T,K,2) px, points (T,K,3) m camera frame, confidence (T,K), head_pose (T,4,4).
+
+    Refuses tracks with nothing lifted to 3D or a face of the wrong size (``check_tracks``);
+    its warnings go to the summary."""
+    import warnings
+
     from physanim.face.landmarks import FEATURE_POINTS
+    from physanim.tracking.checks import check_tracks
     from physanim.tracking.template import load_marker_template
 
     params: TrackStageParams = ctx.params  # type: ignore[assignment]
@@ -69,11 +75,17 @@ def compute(ctx: StageContext) -> None:
         names, template = load_marker_template(ctx.dataset_dir / params.template)
         frames = (cap["color"][...], cap["depth"][...], cap["K"][...])
         tracks = track_markers_rgbd(*frames, template, fps, tracking, progress)
+    what = "the face model" if params.backend == "markerless" else f"the template {params.template}"
+    problems = check_tracks(tracks, template, params.backend, what)
+    for message in problems:
+        warnings.warn(message, UserWarning, stacklevel=1)
     ctx.write_record(tracks)
     ctx.write("template", template)
     ctx.out.attrs.update(names=names, fps=fps, backend=params.backend, lift=params.lift)
     seen = tracks.confidence > 0
-    ctx.summary.update(markers=len(names), tracked_fraction=round(float(seen.mean()), 4))
+    ctx.summary.update(
+        markers=len(names), tracked_fraction=round(float(seen.mean()), 4), warnings=problems
+    )
 
 
 SPEC = StageSpec(

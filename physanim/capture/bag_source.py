@@ -53,7 +53,8 @@ def _index_bag(path: Path) -> _BagIndex:
         reader.open()
     except Exception as exc:  # rosbags raises several types for corrupt files
         raise CaptureError(
-            f"{path}: unreadable or truncated RealSense bag ({exc}); re-copy or re-record it"
+            f"{path}: unreadable or truncated RealSense bag ({type(exc).__name__}: {exc}); "
+            "re-copy or re-record it"
         ) from exc
     try:
         conns = [c for c in reader.connections if c.topic.endswith("/image/data")]

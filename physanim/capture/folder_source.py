@@ -2,7 +2,8 @@
 
 Frames are image files whose stem is the frame number (``000012.png``); a number absent
 from both streams is a gap on the frame grid, an image whose partner (depth, right) is
-absent is an error.
+absent is an error. Colour images are 8-bit RGB, RGBA or greyscale (greyscale is repeated
+into the three channels).
 """
 
 from __future__ import annotations
@@ -15,8 +16,13 @@ import cv2
 import numpy as np
 
 from physanim.capture.frames import Capture, CaptureError, check_gaps, depth_to_metres
+from physanim.capture.intrinsics import FORMS, parse_intrinsics, positive_number
 from physanim.capture.params import IngestParams
 from physanim.capture.stereo import StereoCalibration, StereoDepth
+
+#: Fraction of valid stereo disparities at the ends of the searched range above which ingest
+#: warns that the depth range cuts the scene.
+MAX_AT_LIMITS = 0.05
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -50,15 +56,19 @@ def _paired(a: dict[int, Path], b: dict[int, Path], what_b: str) -> np.ndarray:
 
 
 def read_color(path: Path) -> np.ndarray:
-    """8-bit RGB image (H, W, 3) uint8 from a colour file."""
+    """8-bit RGB image (H, W, 3) uint8 from a colour (or greyscale) file."""
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise CaptureError(f"{path}: unreadable image")
-    if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] not in (3, 4):
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img.dtype != np.uint8 or not (img.ndim == 2 or img.shape[2] in (3, 4)):
         raise CaptureError(
             f"{path}: unsupported colour pixel format ({img.dtype}, shape {img.shape}); "
-            "expected 8-bit RGB or RGBA"
+            "expected 8-bit RGB, RGBA or greyscale"
         )
+    if img.ndim == 2:
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB if img.shape[2] == 3 else cv2.COLOR_BGRA2RGB)
 
 
@@ -75,11 +85,10 @@ def read_depth(path: Path) -> np.ndarray:
     return img
 
 
-def _same_size(a: np.ndarray, b: np.ndarray, pa: Path, pb: Path) -> None:
+def _same_size(a: np.ndarray, b: np.ndarray, pa: Path, pb: Path, fix: str) -> None:
     if a.shape[:2] != b.shape[:2]:
         raise CaptureError(
-            f"{pa} is {a.shape[1]}x{a.shape[0]} but {pb} is {b.shape[1]}x{b.shape[0]}; "
-            "colour and depth must have the same size (register depth to colour first)"
+            f"{pa} is {a.shape[1]}x{a.shape[0]} but {pb} is {b.shape[1]}x{b.shape[0]}; {fix}"
         )
 
 
@@ -90,18 +99,14 @@ def read_rgbd_folder(
     root = Path(root)
     intr_path = root / "intrinsic.json"
     if not intr_path.is_file():
-        raise CaptureError(
-            f"{intr_path}: missing calibration; write Open3D's PinholeCameraIntrinsic JSON "
-            "(width, height, intrinsic_matrix column-major)"
-        )
+        raise CaptureError(f"{intr_path}: missing colour-camera intrinsics; {FORMS}")
     try:
         intr = json.loads(intr_path.read_text())
-        K = np.asarray(intr["intrinsic_matrix"], dtype=np.float64).reshape(3, 3).T
-        size = (int(intr["height"]), int(intr["width"]))
-    except (ValueError, KeyError, TypeError) as exc:
-        raise CaptureError(f"{intr_path}: invalid intrinsics ({exc!r})") from exc
-    scale = 1.0 / float(intr.get("depth_scale", params.rgbd_depth_scale))
-    fps = float(intr.get("fps", params.fallback_fps))
+    except ValueError as exc:
+        raise CaptureError(f"{intr_path}: not valid JSON ({exc}); {FORMS}") from None
+    K, size = parse_intrinsics(intr, intr_path)
+    scale = 1.0 / positive_number(intr, "depth_scale", params.rgbd_depth_scale, intr_path)
+    fps = positive_number(intr, "fps", params.fallback_fps, intr_path)
     colors, depths = list_frames(root / "color"), list_frames(root / "depth")
     idx = _paired(colors, depths, "depth")
     missing = check_gaps(idx, str(root), params.max_missing_fraction)
@@ -109,9 +114,13 @@ def read_rgbd_folder(
     raw = np.empty((len(idx), *size), np.uint16)
     for i, n in enumerate(idx.tolist()):
         c, d = read_color(colors[n]), read_depth(depths[n])
-        _same_size(c, d, colors[n], depths[n])
+        _same_size(c, d, colors[n], depths[n], "colour and depth must have the same size "
+                   "(register depth to colour first)")  # fmt: skip
         if c.shape[:2] != size:
-            raise CaptureError(f"{colors[n]}: size {c.shape[1]}x{c.shape[0]} != {intr_path}")
+            raise CaptureError(
+                f"{colors[n]}: size {c.shape[1]}x{c.shape[0]} but {intr_path} says "
+                f"{size[1]}x{size[0]}; give the intrinsics of these images"
+            )
         color[i], raw[i] = c, d
         if progress is not None:
             progress(i + 1, len(idx))
@@ -138,16 +147,30 @@ def read_stereo_folder(
     idx = _paired(lefts, rights, "right")
     missing = check_gaps(idx, str(root), params.max_missing_fraction)
     fps = calib.fps or params.fallback_fps
-    matcher = StereoDepth(calib, params)
+    matcher = StereoDepth(calib, params, root / "calibration.yaml")
     h, w = matcher.size
     color = np.empty((len(idx), h, w, 3), np.uint8)
     depth = np.empty((len(idx), h, w), np.float32)
+    limits = np.zeros((len(idx), 2))
     for i, n in enumerate(idx.tolist()):
         left, right = read_color(lefts[n]), read_color(rights[n])
-        _same_size(left, right, lefts[n], rights[n])
-        color[i], depth[i] = matcher.compute(left, right, lefts[n])
+        _same_size(
+            left, right, lefts[n], rights[n], "left and right images must have the same size"
+        )
+        if i == 0:
+            _check_orientation(matcher, *matcher.rectified(left, right), root)
+        color[i], depth[i], limits[i] = matcher.compute(left, right, lefts[n])
         if progress is not None:
             progress(i + 1, len(idx))
+    warnings = []
+    near, far = params.stereo_depth_range_m
+    for end, frac, limit in (("far", limits[:, 0], far), ("near", limits[:, 1], near)):
+        if frac.mean() > MAX_AT_LIMITS:
+            warnings.append(
+                f"{root}: {frac.mean():.0%} of the valid disparities sit at the {end} end of the "
+                f"searched depth range ({limit:g} m): the scene extends beyond it; widen "
+                f"ingest.stereo_depth_range_m (now [{near:g}, {far:g}] m)"
+            )
     return Capture(
         color=color,
         depth=depth,
@@ -162,4 +185,18 @@ def read_stereo_folder(
             f"WLS {'on' if params.wls else 'off'})"
         ),
         dropped=missing,
+        warnings=warnings,
     )
+
+
+def _check_orientation(rig: StereoDepth, left: np.ndarray, right: np.ndarray, root: Path) -> None:
+    """Refuse a rectified pair (H, W, 3) whose sparse matches fit the searched depth range
+    only with the images swapped."""
+    n, as_given, swapped = rig.orientation(left, right)
+    if n >= 20 and swapped > 0.3 and swapped > 3 * as_given:
+        raise CaptureError(
+            f"{root}: left and right look swapped ({swapped:.0%} of {n} row-aligned feature "
+            f"matches fit the depth range if swapped, {as_given:.0%} as given); swap the folders "
+            "left/ and right/ (a near object sits further right in the left image than in the "
+            "right one)"
+        )

@@ -3,12 +3,26 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
 
 class CaptureError(ValueError):
     """A recording cannot be ingested; the message names the file and the problem."""
+
+
+class CaptureWarning(UserWarning):
+    """A recording was ingested but looks doubtful; the message names the file and the fix."""
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One finding about a recording: an ``error`` (refused) or a ``warning``; ``message``
+    is one line naming the file, the field or option, and the fix."""
+
+    level: Literal["error", "warning"]
+    message: str
 
 
 @dataclass
@@ -23,7 +37,10 @@ class Capture:
     depth pixels; ``depth_median`` (T,) m median valid depth (NaN if none); ``dropped``
     grid indices missing from the output; ``duplicated`` grid indices a reader returned
     more than once (kept once); ``recovered`` indices that the primary reader dropped and
-    that were read from the file directly.
+    that were read from the file directly; ``warnings`` one line each (doubtful input);
+    ``implausible_depth`` frame numbers whose depth cannot be of surfaces (a damaged file,
+    ``physanim.capture.validate``); ``kind`` the source type (bag, rgbd, stereo) and
+    ``origin`` the file or folder read.
     """
 
     color: np.ndarray
@@ -39,8 +56,16 @@ class Capture:
     dropped: list[int] = field(default_factory=list)
     duplicated: list[int] = field(default_factory=list)
     recovered: list[int] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    implausible_depth: list[int] = field(default_factory=list)
+    kind: str = ""
+    origin: str = ""
 
     def __post_init__(self) -> None:
+        self.update_stats()
+
+    def update_stats(self) -> None:
+        """Recompute ``valid_fraction`` and ``depth_median`` from ``depth``."""
         valid = np.isfinite(self.depth)
         self.valid_fraction = valid.mean(axis=(1, 2))
         med = np.full(len(self.depth), np.nan)

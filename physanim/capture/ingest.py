@@ -5,19 +5,27 @@
 first present in the dataset directory: a ``*.bag`` file, an RGBD folder (``rgbd/`` or
 the directory itself with ``color/`` + ``depth/``), a stereo folder (``stereo/`` or the
 directory itself with ``left/`` + ``right/``). ``dataset_dir`` may also be a ``.bag`` file.
+The result is checked (``physanim.capture.validate``) before anything is computed from it.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
-from physanim.capture.bag_source import read_bag
-from physanim.capture.folder_source import read_rgbd_folder, read_stereo_folder
-from physanim.capture.frames import Capture, CaptureError
-from physanim.capture.params import IngestParams
+import numpy as np
 
-__all__ = ["Capture", "CaptureError", "find_source", "load_capture"]
+from physanim.capture.bag_source import read_bag
+from physanim.capture.folder_source import IMAGE_SUFFIXES, read_rgbd_folder, read_stereo_folder
+from physanim.capture.frames import Capture, CaptureError, CaptureWarning, Problem
+from physanim.capture.params import IngestParams
+from physanim.capture.validate import check_capture
+
+__all__ = [
+    "Capture", "CaptureError", "CaptureWarning", "find_source", "load_capture", "read_capture",
+    "source_files",
+]  # fmt: skip
 
 
 def _find_bag(d: Path) -> Path | None:
@@ -52,11 +60,52 @@ def find_source(dataset_dir: Path, source: str = "auto") -> tuple[str, Path]:
         if path is not None:
             return kind, path
     want = {
-        "bag": "a *.bag file",
-        "rgbd": "rgbd/color + rgbd/depth",
-        "stereo": "stereo/left + stereo/right",
+        "bag": "a RealSense *.bag file",
+        "rgbd": "an RGBD folder (rgbd/ or the dataset itself with color/, depth/, intrinsic.json)",
+        "stereo": "a stereo folder (stereo/ or the dataset itself with left/, right/, "
+        "calibration.yaml)",
     }
-    raise CaptureError(f"{d}: no {' or '.join(want[k] for k in kinds)} found (source={source!r})")
+    raise CaptureError(
+        f"{d}: no recording found; looked for {' or '.join(want[k] for k in kinds)} "
+        f"(ingest.source={source}); see the README section 'Your own recording'"
+    )
+
+
+def source_files(kind: str, path: Path) -> list[Path]:
+    """Exactly the files ingest reads for the source ``(kind, path)`` of ``find_source``:
+    the bag; or the calibration file and the frame images (never anything else in the
+    folder, such as the run directory of a dataset-root layout)."""
+    if kind == "bag":
+        return [path]
+    calib, streams = {"rgbd": ("intrinsic.json", ("color", "depth")),
+                      "stereo": ("calibration.yaml", ("left", "right"))}[kind]  # fmt: skip
+    files = [path / calib] if (path / calib).is_file() else []
+    for sub in streams:
+        folder = path / sub
+        if folder.is_dir():
+            files += sorted(f for f in folder.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
+    return files
+
+
+def read_capture(
+    dataset_dir: Path,
+    params: IngestParams | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[Capture, list[Problem]]:
+    """Read the recording in ``dataset_dir`` and check it (``physanim.capture.validate``);
+    unreadable input raises ``CaptureError``, doubtful input is returned as problems."""
+    params = params or IngestParams()
+    kind, path = find_source(Path(dataset_dir), params.source)
+    reader = {"bag": read_bag, "rgbd": read_rgbd_folder, "stereo": read_stereo_folder}[kind]
+    capture = reader(path, params, progress)
+    capture.kind, capture.origin = kind, str(path)
+    problems, implausible = check_capture(capture, params)
+    capture.implausible_depth = sorted(implausible)
+    if implausible and params.implausible_depth == "drop":
+        capture.depth[np.isin(capture.frame_index, list(implausible))] = np.nan
+        capture.update_stats()
+    problems = [Problem("warning", w) for w in capture.warnings] + problems
+    return capture, problems
 
 
 def load_capture(
@@ -64,8 +113,16 @@ def load_capture(
     params: IngestParams | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> Capture:
-    """Ingest the recording in ``dataset_dir``; see the module docstring and ``Capture``."""
-    params = params or IngestParams()
-    kind, path = find_source(Path(dataset_dir), params.source)
-    reader = {"bag": read_bag, "rgbd": read_rgbd_folder, "stereo": read_stereo_folder}[kind]
-    return reader(path, params, progress)
+    """Ingest the recording in ``dataset_dir``; see the module docstring and ``Capture``.
+
+    Errors found by the checks raise ``CaptureError`` (one line each); warnings are issued as
+    ``CaptureWarning`` and kept in ``Capture.warnings``.
+    """
+    capture, problems = read_capture(dataset_dir, params, progress)
+    errors = [p.message for p in problems if p.level == "error"]
+    if errors:
+        raise CaptureError("\n".join(errors))
+    capture.warnings = [p.message for p in problems]
+    for message in capture.warnings:
+        warnings.warn(message, CaptureWarning, stacklevel=2)
+    return capture

@@ -47,16 +47,30 @@ class IngestParams(BaseModel):
         description="Recover frames that Open3D's real-time bag playback dropped by reading "
         "them from the bag directly (they are still reported); bool",
     )
+    implausible_depth: Literal["error", "drop", "keep"] = Field(
+        "error",
+        description="Depth frames that cannot be a depth image of surfaces (damaged file): "
+        "refuse the recording, make their depth invalid, or keep them",
+    )
     rgbd_depth_scale: float = Field(
         1000.0, gt=0, description="RGBD folders without depth_scale in intrinsic.json: units per m"
     )
     fallback_fps: float = Field(
         30.0, gt=0, description="Frame rate of folders whose metadata has no fps; frames/s"
     )
-    min_disparity: int = Field(40, ge=0, le=512, description="Stereo: smallest disparity; px")
-    num_disparities: int = Field(
-        64, ge=16, le=512, multiple_of=16, description="Stereo: disparity search range; px"
+    stereo_depth_range_m: tuple[float, float] = Field(
+        (0.3, 1.2),
+        description="Stereo: nearest and farthest depth searched (sets SGBM's disparity range "
+        "from the calibration's f_x and baseline); m",
     )
+
+    @field_validator("stereo_depth_range_m")
+    @classmethod
+    def _depth_range(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not 0.0 < v[0] < v[1]:
+            raise ValueError(f"{list(v)}: needs 0 < near < far (metres)")
+        return v
+
     block_size: int = Field(5, ge=1, le=21, description="Stereo: SGBM block size (odd); px")
 
     @field_validator("block_size")
@@ -66,7 +80,7 @@ class IngestParams(BaseModel):
             raise ValueError(f"block_size={v}: SGBM needs an odd block size")
         return v
 
-    uniqueness_ratio: int = Field(5, ge=0, le=100, description="Stereo: SGBM uniqueness; %")
+    uniqueness_ratio: int = Field(10, ge=0, le=100, description="Stereo: SGBM uniqueness; %")
     speckle_window_size: int = Field(
         100, ge=0, le=1000, description="Stereo: speckle filter window (0 = off); px"
     )
@@ -75,7 +89,7 @@ class IngestParams(BaseModel):
         1.0, ge=0.0, le=10.0, description="Stereo: left-right consistency tolerance; px"
     )
     min_texture: float = Field(
-        3.0,
+        1.3,
         ge=0.0,
         le=100.0,
         description="Stereo: invalid where the block's grey-level std is lower; 8-bit levels",

@@ -45,14 +45,15 @@ def lift_depth(uv: np.ndarray, depth: np.ndarray, K: np.ndarray, window: int) ->
 
 
 def triangulate_rectified(
-    uv_left: np.ndarray, uv_right: np.ndarray, K: np.ndarray, baseline: float
+    uv_left: np.ndarray, uv_right: np.ndarray, K: np.ndarray, baseline: float, doffs: float = 0.0
 ) -> np.ndarray:
     """3D points (K, 3) m in the left camera frame from a rectified pair (K, 2) px each.
 
-    Both cameras share intrinsics ``K`` (3, 3); the right camera sits ``baseline`` m along
-    +x. Non-positive disparities give NaN.
+    Both cameras share intrinsics ``K`` (3, 3) of the left camera, except the right camera's
+    principal point column, ``doffs`` px further right; the right camera sits ``baseline`` m
+    along +x. Non-positive disparities (``u_left - u_right + doffs``) give NaN.
     """
-    disparity = uv_left[:, 0] - uv_right[:, 0]
+    disparity = uv_left[:, 0] - uv_right[:, 0] + doffs
     z = np.where(
         disparity > 0, K[0, 0] * baseline / np.where(disparity > 0, disparity, 1.0), np.nan
     )

@@ -40,7 +40,7 @@ import numpy as np
 from physanim.face.landmarks import FEATURE_POINTS
 from physanim.tracking.assemble import tracks_from_depth
 from physanim.tracking.params import TrackParams
-from physanim.tracking.track import Tracks
+from physanim.tracking.track import TrackingError, Tracks
 
 #: SPEC feature point -> MediaPipe Face Mesh vertices (canonical 468-vertex topology) whose
 #: mean is the point; midpoints where the mesh has no vertex on the landmark (the philtrum
@@ -290,4 +290,10 @@ def track_markerless_rgbd(
     if len(colors) != len(depths):
         raise ValueError(f"colors ({len(colors)}) and depths ({len(depths)}): frame counts differ")
     uv, conf = track_markerless_2d(colors, params, progress)
+    if not (conf > 0).any():
+        raise TrackingError(
+            f"no face found in any of the {len(colors)} frames (face detector score below "
+            f"track.markerless_min_detection={params.markerless_min_detection}); check that a "
+            "face is visible, roughly frontal and lit, or lower markerless_min_detection"
+        )
     return tracks_from_depth(uv, conf, depths, K, feature_template(), fps, params)

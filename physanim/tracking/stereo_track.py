@@ -14,13 +14,11 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
 from physanim.capture.folder_source import _paired, list_frames, read_color
-from physanim.capture.params import IngestParams
-from physanim.capture.stereo import StereoCalibration, StereoDepth
+from physanim.capture.stereo import StereoCalibration, StereoRig
 from physanim.tracking.assemble import tracks_from_points
 from physanim.tracking.detect import detect_markers
 from physanim.tracking.label import assign, label_markers
@@ -96,12 +94,9 @@ def track_markers_stereo(
     """
     if len(lefts) != len(rights):
         raise ValueError(f"lefts ({len(lefts)}) and rights ({len(rights)}): frame counts differ")
-    rig = StereoDepth(calib, IngestParams())
-    if rig.rectify:
-        lefts, rights = (
-            [cv2.remap(img, mx, my, cv2.INTER_LINEAR) for img in seq]
-            for seq, (mx, my) in zip((lefts, rights), rig.maps, strict=True)
-        )
+    rig = StereoRig(calib)
+    pairs = [rig.rectified(a, b) for a, b in zip(lefts, rights, strict=True)]
+    lefts, rights = [a for a, _ in pairs], [b for _, b in pairs]
     template = frontal_template(template_actor)
     uv_l, conf = track_markers_2d(lefts, template, params, progress)
     n_t, k = conf.shape
@@ -124,6 +119,9 @@ def track_markers_stereo(
         found = np.isfinite(uv_r[t, :, 0])
         prior = np.where(found, uv_l[t, :, 0] - uv_r[t, :, 0], np.nan)
     raw = np.stack(
-        [triangulate_rectified(uv_l[t], uv_r[t], rig.K, rig.baseline) for t in range(n_t)]
+        [
+            triangulate_rectified(uv_l[t], uv_r[t], rig.K, rig.baseline, rig.doffs)
+            for t in range(n_t)
+        ]
     )
     return tracks_from_points(uv_l, conf, raw, template_actor, fps, params)

@@ -19,7 +19,8 @@ def load_marker_template(path: Path) -> tuple[list[str], np.ndarray]:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(
-            f"{path}: marker template not found; give track.template as a JSON file "
+            f"{path}: marker template not found; for a recording without painted markers set "
+            "track.backend=markerless, else give track.template as a JSON file "
             '{"names": [...], "positions_m": [[x, y, z], ...]} or a Zarr group with '
             "markers_neutral + marker_names"
         )

@@ -20,6 +20,10 @@ from physanim.tracking.similarity import fit_transform
 from physanim.tracking.smooth import kalman_rts, one_euro
 
 
+class TrackingError(ValueError):
+    """Tracking found nothing usable; the message names the cause and the fix."""
+
+
 @dataclass(frozen=True)
 class Tracks:
     """Tracked landmarks over T frames and K landmarks.
@@ -67,7 +71,20 @@ def track_markers_2d(
     uv = np.full((n_t, k, 2), np.nan)
     conf = np.zeros((n_t, k))
     dots = detect_markers(frames[0], params)
-    match, _ = label_markers(template, dots, params.label_gate_px)
+    if len(dots) < 3:
+        raise TrackingError(
+            f"frame 0: {len(dots)} painted marker dot(s) found, labelling needs at least 3 of "
+            f"the template's {k}; for a recording without painted markers set "
+            "track.backend=markerless, else adjust track.marker_rgb / track.chroma_tolerance"
+        )
+    try:
+        match, _ = label_markers(template, dots, params.label_gate_px)
+    except ValueError:
+        raise TrackingError(
+            f"frame 0: cannot fit the marker template ({k} markers) to the {len(dots)} dots "
+            "found; for a recording without painted markers set track.backend=markerless, else "
+            "check track.template and track.marker_rgb"
+        ) from None
     estimate = np.full((k, 2), np.nan)
     estimate[match >= 0] = dots[match[match >= 0]]
     lk = dict(

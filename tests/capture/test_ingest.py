@@ -146,6 +146,6 @@ def test_params_validation() -> None:
     with pytest.raises(ValidationError, match="odd"):
         IngestParams(block_size=4)
     with pytest.raises(ValidationError):
-        IngestParams(num_disparities=50)
+        IngestParams(stereo_depth_range_m=(1.0, 0.5))
     with pytest.raises(ValidationError):
         IngestParams(unknown=1)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -36,3 +38,30 @@ def test_ingest_stage_caches_and_reruns_on_stereo_edit(demo_dir: Path, tmp_path:
     assert again[0].action == "cached"
     _, edited = plan_for(demo_dir, store_path, "ingest.block_size=7")
     assert edited[0].action == "run" and "ingest.block_size: 5 -> 7" in edited[0].reason
+
+
+def test_dataset_root_layout_caches_and_track_runs_after_ingest(
+    demo_dir: Path, tmp_path: Path
+) -> None:
+    """color/, depth/, intrinsic.json at the dataset root, the store inside it (the default
+    data/<name>/runs/store.zarr): ingest's key depends on exactly its input files, so the
+    run directory growing does not make it run again."""
+    root = tmp_path / "mine"
+    shutil.copytree(demo_dir / "rgbd", root)
+    shutil.copytree(demo_dir / "ground_truth.zarr", root / "ground_truth.zarr")
+    sets = [f"dataset.dir={root}"]
+    cfg, _ = load_config(FACE.config_model(), [FACE.default_config], sets)
+    assert cfg.dataset.store_path == root / "runs" / "store.zarr"
+    store = StageStore(cfg.dataset.store_path)
+    plan = make_plan(FACE, cfg, store, only="ingest")
+    assert [e.action for e in plan if e.stage == "ingest"] == ["run"]
+    execute_plan_locally(FACE, cfg, plan)
+    again = {e.stage: e for e in make_plan(FACE, cfg, store, only="track")}
+    assert again["ingest"].action == "cached", again["ingest"].reason
+    results = execute_plan_locally(FACE, cfg, list(again.values()))
+    assert [(r.stage, r.action) for r in results] == [("ingest", "cached"), ("track", "ran")]
+    final = {e.stage: e.action for e in make_plan(FACE, cfg, store)}
+    assert final["ingest"] == final["track"] == "cached"
+    (root / "depth" / "000002.png").touch()  # an edited input file does change the key
+    os.utime(root / "depth" / "000002.png", ns=(1, 1))
+    assert make_plan(FACE, cfg, store)[0].action == "run"

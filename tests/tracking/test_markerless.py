@@ -1,7 +1,9 @@
-"""Markerless backend on a real photo (skimage's astronaut, NASA, public domain)."""
+"""Markerless backend on real photos: skimage's astronaut (NASA, public domain) and its LFW
+subset of small face crops."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -110,3 +112,19 @@ def test_missing_model_package_names_the_extra(monkeypatch: pytest.MonkeyPatch) 
     monkeypatch.setattr("importlib.util.find_spec", lambda name: None)
     with pytest.raises(MarkerlessUnavailableError, match=r"\.\[markerless\]"):
         model_dir()
+
+
+def test_detects_small_real_faces_in_greyscale() -> None:
+    """scikit-image's LFW subset: 100 real 25x25 greyscale face crops and 100 crops without
+    a face (Labeled Faces in the Wild), padded by 4 px and enlarged to 128 px."""
+    crops = skdata.lfw_subset()
+
+    def detected(crop: np.ndarray) -> bool:
+        grey = cv2.copyMakeBorder((crop * 255).astype(np.uint8), 4, 4, 4, 4, cv2.BORDER_REPLICATE)
+        grey = cv2.resize(grey, (128, 128), interpolation=cv2.INTER_CUBIC)
+        return detect_face(cv2.cvtColor(grey, cv2.COLOR_GRAY2RGB), 0.5) is not None
+
+    faces = sum(detected(c) for c in crops[:100])
+    others = sum(detected(c) for c in crops[100:])
+    print(f"LFW subset: {faces} of 100 faces found, {others} of 100 non-faces")
+    assert faces >= 95 and others <= 3
