@@ -29,7 +29,7 @@ from physanim.mesh.materials import tet_materials
 from physanim.mesh.params import AlignParams, MaterialModel, MaterialsParams, TetraParams
 from physanim.mesh.regions import LABEL_NAMES, plot_regions, region_areas, skin_regions, tet_regions
 from physanim.mesh.remesh import prepare_scan
-from physanim.mesh.tetra import label_nodes, tetrahedralize_surface
+from physanim.mesh.tetra import label_nodes, landmark_nodes, tetrahedralize_surface
 from physanim.mesh.tissue import build_tissue_surface
 
 
@@ -127,13 +127,17 @@ def main() -> None:
     with Timer("tetrahedralize_surface (fTetWild)"):
         mesh, q = tetrahedralize_surface(surf.vertices, surf.faces, tp)
     with Timer("label_nodes"):
-        labels = label_nodes(mesh, surf, targets, tp)
+        labels = label_nodes(mesh, surf, tp)
+        no_seam = np.zeros(len(mesh.nodes), dtype=np.int8)
+        _, lm_distance = landmark_nodes(
+            mesh.nodes, labels.skin, no_seam, targets, np.zeros(len(targets))
+        )
     for k, val in q.as_dict().items():
         print(f"  {k:<24s} {val:.4g}" if isinstance(val, float) else f"  {k:<24s} {val}")
     print(
         f"  enclosed volume {surf.enclosed_volume():.4g} m^3; skin nodes {labels.skin.sum()}, "
         f"bone nodes {labels.bone.sum()}, landmark-node distance max "
-        f"{labels.landmark_distance.max() * 1e3:.2f} mm"
+        f"{lm_distance.max() * 1e3:.2f} mm"
     )
 
     print("regions + materials")

@@ -31,7 +31,7 @@ from scipy.spatial import Delaunay, cKDTree
 from scipy.spatial.transform import Rotation
 
 from physanim.face.landmarks import FEATURE_POINTS, mirror_name
-from physanim.face.model import MODEL_PATH, FaceModel, save_face_model
+from physanim.face.model import MODEL_PATH, MOUTH_SLIT, FaceModel, save_face_model
 
 MM = 1e-3
 
@@ -149,9 +149,7 @@ def triangulate(names: tuple[str, ...], xy: np.ndarray) -> np.ndarray:
     opened[xy[:, 1] < y_ch - 0.1, 1] -= 4.0
     tri = Delaunay(opened).simplices
     holes = [[index[n + s] for n in EYE_RING] for s in ("_L", "_R")]
-    mouth = ["ch_R", "lip_upper_in_2_R", "lip_upper_in_1_R", "stomion_superius"]
-    mouth += ["lip_upper_in_1_L", "lip_upper_in_2_L", "ch_L", "lip_lower_in_2_L"]
-    mouth += ["lip_lower_in_1_L", "stomion_inferius", "lip_lower_in_1_R", "lip_lower_in_2_R"]
+    mouth = [u for u, _ in MOUTH_SLIT] + [lo for _, lo in reversed(MOUTH_SLIT[1:-1])]
     holes.append([index[n] for n in mouth])
     centroids = opened[tri].mean(axis=1)
     inside = np.zeros(len(tri), dtype=bool)

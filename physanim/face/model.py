@@ -32,6 +32,28 @@ from scipy.spatial.transform import Rotation
 #: The packaged model file.
 MODEL_PATH = Path(__file__).parent / "data" / "model.npz"
 
+#: The lips' contact line (the mouth slit) of the model, from the right mouth corner to the
+#: left: (upper lip vertex, lower lip vertex) pairs; the corners are shared.
+MOUTH_SLIT: tuple[tuple[str, str], ...] = (
+    ("ch_R", "ch_R"),
+    ("lip_upper_in_2_R", "lip_lower_in_2_R"),
+    ("lip_upper_in_1_R", "lip_lower_in_1_R"),
+    ("stomion_superius", "stomion_inferius"),
+    ("lip_upper_in_1_L", "lip_lower_in_1_L"),
+    ("lip_upper_in_2_L", "lip_lower_in_2_L"),
+    ("ch_L", "ch_L"),
+)
+
+
+def mouth_line_points(vertices: np.ndarray, vertex_names: list[str]) -> np.ndarray | None:
+    """Lip contact polyline (P, 3) m, right to left corner: midpoints of the MOUTH_SLIT pairs
+    of a posed model ``vertices`` (V, 3) m; None when the model lacks those vertices."""
+    index = {n: i for i, n in enumerate(vertex_names)}
+    if any(u not in index or lo not in index for u, lo in MOUTH_SLIT):
+        return None
+    v = np.asarray(vertices, dtype=np.float64)
+    return np.stack([0.5 * (v[index[u]] + v[index[lo]]) for u, lo in MOUTH_SLIT])
+
 
 def pose_matrix(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation (3, 3) and translation (3,) m of a pose ``(6,)`` = (rotation vector rad, t m)."""

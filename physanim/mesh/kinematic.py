@@ -64,6 +64,12 @@ def animate_bound_points(
     if not 0 <= reference_frame < n_frames:
         raise ValueError(f"reference_frame {reference_frame} outside [0, {n_frames})")
     w = blend_matrix(binding, faces, n_vertices)
-    disp = motion - motion[reference_frame]  # (T, V, 3)
-    blended = w @ disp.transpose(1, 0, 2).reshape(n_vertices, n_frames * 3)  # (N, T*3)
-    return rest_points[None] + blended.reshape(-1, n_frames, 3).transpose(1, 0, 2)
+    return rest_points[None] + blend_frames(w, motion - motion[reference_frame])
+
+
+def blend_frames(w: sp.csr_array, values: np.ndarray) -> np.ndarray:
+    """Apply a blend matrix (N, V) to per-frame values (T, V, 3) -> (T, N, 3), one product."""
+    values = np.asarray(values, dtype=np.float64)
+    n_t, n_v, _ = values.shape
+    blended = w @ values.transpose(1, 0, 2).reshape(n_v, n_t * 3)  # (N, T*3)
+    return blended.reshape(-1, n_t, 3).transpose(1, 0, 2)

@@ -54,6 +54,26 @@ class AlignParams(BaseModel):
         gt=0.0,
         description="Wireframe vertices farther than this from the scan are not pulled, metres.",
     )
+    notch_max_gap_m: float = Field(
+        0.006,
+        ge=0.0,
+        le=0.05,
+        description="Slits reaching into the scan from its border (creases the scanner lost) "
+        "narrower than this across the view axis are zipped shut, metres (0 keeps them).",
+    )
+    notch_min_depth_m: float = Field(
+        0.008,
+        gt=0.0,
+        le=0.2,
+        description="Only slits longer than this along the border are closed, metres.",
+    )
+    lip_band_m: float = Field(
+        0.015,
+        gt=0.0,
+        le=0.05,
+        description="Between the mouth corners, scan and tissue within this height of the "
+        "lip contact line are split into upper and lower lip by the lip seam, metres.",
+    )
     binding_candidates: int = Field(
         8, ge=1, le=256, description="Initial candidate triangles per scan vertex (count)."
     )

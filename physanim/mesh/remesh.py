@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pymeshlab
 
+from physanim.mesh.notches import close_border_notches
 from physanim.mesh.scan_io import FACE_EXTENT_RANGE_M
 from physanim.mesh.topology import boundary_edges
 
@@ -110,17 +111,28 @@ def close_inner_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarr
 
 
 def prepare_scan(
-    vertices: np.ndarray, faces: np.ndarray, edge_length_m: float, iterations: int = 6
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    edge_length_m: float,
+    iterations: int = 6,
+    notch_max_gap_m: float = 0.0,
+    notch_min_depth_m: float = 0.008,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Scan preparation after ``scan_io.clean_scan``: close inner holes, remesh isotropically.
+    """Scan preparation after ``scan_io.clean_scan``: close inner holes and border notches,
+    remesh isotropically.
 
     Args:
         vertices: (N, 3) cleaned scan, metres; faces: (M, 3) int.
         edge_length_m: target edge length, metres (``AlignParams.remesh_edge_length_m``).
         iterations: remeshing passes.
+        notch_max_gap_m, notch_min_depth_m: slits reaching in from the border narrower than
+            the gap and deeper than the depth (metres) are zipped shut
+            (:func:`physanim.mesh.notches.close_border_notches`); a gap of 0 keeps them.
 
     Returns:
         (V (N', 3) metres, F (M', 3) int64): one component with one open border.
     """
     v, f = close_inner_holes(*remesh_isotropic(vertices, faces, 2.0 * edge_length_m, 2))
+    if notch_max_gap_m > 0:
+        f, _ = close_border_notches(v, f, notch_max_gap_m, notch_min_depth_m)
     return remesh_isotropic(v, f, edge_length_m, iterations)

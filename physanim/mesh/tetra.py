@@ -185,26 +185,19 @@ class NodeLabels:
 
     Attributes:
         skin: (n,) bool, boundary nodes on the skin surface.
-        bone: (n,) bool, boundary nodes on the bone-side surface (fixed in the FEM).
-        landmark_node: (K,) int64, the skin node driven by each landmark.
-        landmark_distance: (K,) distance from each landmark to its node, metres.
+        bone: (n,) bool, boundary nodes on the bone-side surface (skull or mandible in the FEM).
     """
 
     skin: np.ndarray
     bone: np.ndarray
-    landmark_node: np.ndarray
-    landmark_distance: np.ndarray
 
 
-def label_nodes(
-    mesh: TetMesh, surface: TissueSurface, landmarks: np.ndarray, params: TetraParams
-) -> NodeLabels:
-    """Label skin / bone-side boundary nodes and pick the skin node of each landmark.
+def label_nodes(mesh: TetMesh, surface: TissueSurface, params: TetraParams) -> NodeLabels:
+    """Label skin / bone-side boundary nodes of a tissue tet mesh.
 
     Args:
         mesh: the tissue tet mesh.
         surface: the tissue surface it was built from (face parts tell skin from bone).
-        landmarks: (K, 3) tracked feature points on the skin, metres.
         params: ``label_tolerance_rel`` (times ``edge_length_m``) decides on-surface.
     """
     tol = params.label_tolerance_rel * params.edge_length_m
@@ -220,15 +213,36 @@ def label_nodes(
         return out
 
     skin = near(PART_SKIN)
-    bone = near(PART_BONE) & ~skin
-    skin_idx = np.nonzero(skin)[0]
-    if len(skin_idx) == 0:
+    if not skin.any():
         raise TetMeshError("no tet node lies on the skin surface; check label_tolerance_rel")
+    return NodeLabels(skin=skin, bone=near(PART_BONE) & ~skin)
+
+
+def landmark_nodes(
+    nodes: np.ndarray,
+    skin: np.ndarray,
+    node_side: np.ndarray,
+    landmarks: np.ndarray,
+    landmark_side: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The nearest skin node (K,) of each landmark (K, 3) m on its own side of the lip seam
+    (sides as in :mod:`physanim.mesh.seam`), and the distance (K,) m to it."""
     lm = np.asarray(landmarks, dtype=np.float64).reshape(-1, 3)
-    dist, j = cKDTree(mesh.nodes[skin_idx]).query(lm)
-    return NodeLabels(
-        skin=skin,
-        bone=bone,
-        landmark_node=skin_idx[np.asarray(j, dtype=np.int64)],
-        landmark_distance=np.asarray(dist, dtype=np.float64),
-    )
+    skin_idx = np.nonzero(skin)[0]
+    d = np.linalg.norm(nodes[skin_idx][None] - lm[:, None], axis=2)  # (K, S)
+    wrong = (np.asarray(landmark_side)[:, None] * node_side[skin_idx][None]) < 0
+    d[wrong] = np.inf
+    j = np.argmin(d, axis=1)
+    return skin_idx[j], d[np.arange(len(lm)), j]
+
+
+def skin_anchors(nodes: np.ndarray, bone: np.ndarray, surface: TissueSurface) -> np.ndarray:
+    """(n, 3) m: for each bone-side node, the skin point it lies behind (the bone-side
+    surface is the skin moved inward, vertex by vertex); other nodes: their own position."""
+    n_skin = surface.n_skin
+    inner = surface.vertices[n_skin:]
+    out = np.array(nodes, dtype=np.float64)
+    b = np.nonzero(bone)[0]
+    _, j = cKDTree(inner).query(out[b])
+    out[b] = surface.vertices[:n_skin][j]
+    return out

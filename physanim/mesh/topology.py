@@ -74,3 +74,10 @@ def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+
+
+def vertex_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V,) area attributed to each vertex: a third of every incident triangle's area."""
+    f = np.asarray(faces, dtype=np.int64)
+    third = np.repeat(triangle_areas(vertices, f) / 3.0, 3)
+    return np.bincount(f.ravel(), third, minlength=len(vertices))

@@ -11,6 +11,7 @@ from physanim.mesh.tetra import (
     boundary_faces,
     dihedral_angles,
     label_nodes,
+    landmark_nodes,
     orient_and_check,
     tet_volumes,
     tetrahedralize_surface,
@@ -112,11 +113,13 @@ def test_coarse_face_tets_are_positive_and_labelled(skin, landmarks):
     scale = (TetraParams().edge_length_m / params.edge_length_m) ** 3
     assert 5_000 * scale * 0.5 <= q.n_nodes <= 10_000 * scale * 1.5
     lm = np.array([landmarks[n] for n in FEATURE_POINTS])
-    labels = label_nodes(mesh, surface, lm, params)
+    labels = label_nodes(mesh, surface, params)
     assert labels.skin.sum() > 0 and labels.bone.sum() > 0
     assert not np.any(labels.skin & labels.bone)
-    assert labels.skin[labels.landmark_node].all()
-    assert labels.landmark_distance.max() < params.edge_length_m
+    side = np.zeros(len(mesh.nodes), dtype=np.int8)
+    node, distance = landmark_nodes(mesh.nodes, labels.skin, side, lm, np.zeros(len(lm)))
+    assert labels.skin[node].all()
+    assert distance.max() < params.edge_length_m
     # Skin nodes sit in front of bone nodes: larger z on average (actor frame, +z out).
     assert mesh.nodes[labels.skin, 2].mean() > mesh.nodes[labels.bone, 2].mean()
     assert set(np.unique(surface.part)) == {PART_SKIN, PART_BONE, 2}
