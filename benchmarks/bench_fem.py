@@ -43,8 +43,8 @@ def demo_inputs() -> tuple[dict[str, Any], SimulateStageParams]:
             print("computing the demo's " + ", ".join(e.stage for e in plan if e.action == "run"))
         execute_plan_locally(FACE, config, plan, progress)
     key = {e.stage: e.key for e in plan}
-    groups = (store.open(s, key[s]) for s in ("align", "tetra", "materials"))
-    args, _, _ = simulate_inputs(*groups, config.simulate.drive)  # type: ignore[attr-defined]
+    groups = (store.open(s, key[s]) for s in ("track", "align", "tetra", "materials"))
+    args, _ = simulate_inputs(*groups, config.simulate)  # type: ignore[attr-defined]
     return args, config.simulate  # type: ignore[attr-defined]
 
 
@@ -70,13 +70,14 @@ def main() -> None:
 
     sim, params = demo_inputs()
     nodes, tets, mat = sim["nodes"], sim["tets"], sim["materials"]
-    driven, fixed, traj = sim["driven_idx"], sim["fixed_idx"], sim["driven_traj"]
+    driven, traj, springs = sim["driven_idx"], sim["driven_traj"], sim["springs"]
     print(
         f"demo mesh: {len(nodes)} nodes, {len(tets)} tets, {3 * len(nodes)} DOF "
-        f"({len(fixed)} fixed, {len(driven)} driven nodes); {len(traj)} frames at "
-        f"{1 / sim['frame_dt']:.0f} fps"
+        f"({len(driven)} prescribed bone-side nodes, "
+        f"{0 if springs is None else len(springs.nodes)} skin nodes on springs); "
+        f"{len(traj)} frames at {1 / sim['frame_dt']:.0f} fps"
     )
-    pres = (3 * np.concatenate([driven, fixed])[:, None] + np.arange(3)).ravel()
+    pres = (3 * driven[:, None] + np.arange(3)).ravel()
     dt = params.dt
 
     all_threads = numba.get_num_threads()
@@ -113,7 +114,8 @@ def main() -> None:
 
     n_cor = 3
     cor = params.model_copy(update={"corotational": True})
-    res_c = simulate(**{**sim, "driven_traj": traj[: n_cor + 1]}, params=cor)
+    short = {**sim, "driven_traj": traj[: n_cor + 1], "springs": None}  # corotational: no springs
+    res_c = simulate(**short, params=cor)
     steps_c = n_cor * res_c.n_substeps
     print(
         f"corotational: {1e3 * res_c.timings['stepping'] / steps_c:.1f} ms/step over {steps_c} "

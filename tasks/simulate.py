@@ -1,108 +1,137 @@
-"""Stage ``simulate``: viscoelastic FEM of the tissue driven by the tracked feature points.
+"""Stage ``simulate``: viscoelastic FEM of the tissue, driven by the tracked face.
 
-Landmark skin nodes follow the motion mesh's feature-point displacements (scan frame), bone-side
-nodes are fixed, all others are free (SPEC eq 4.37).  Outputs at the capture frame rate.
+The boundary conditions come from the library (``physanim.face.drive``): skull nodes fixed,
+mandible nodes turned by the jaw rotation estimated from the tracked landmarks, and the skin
+pulled by landmark springs (default), by the kinematic scan, or prescribed at single nodes (the
+seed, ``configs/drives/seed.yaml``).  Outputs at the capture frame rate.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from pydantic import ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field
 
-from physanim.face.landmarks import FEATURE_POINTS
+from physanim.face.params import DriveParams, JawParams
 from physanim.fem.params import SimulateParams
 from physanim.pipeline import StageContext, StageSpec
 
-#: Driven feature points by default: 7 points on the edges of the mimetic muscles (the seed
-#: drove its FEM with 7 tracked points; its text does not list them).  The philtrum, nose wings
-#: and lower eyelids stay free, so the material decides how they move.
-DRIVE = ("ch_L", "ch_R", "cheek_L", "cheek_R", "ex_L", "ex_R", "glabella")
-
 
 class SimulateStageParams(SimulateParams):
-    """FEM settings plus which tracked feature points drive the skin."""
+    """FEM settings plus how the tracked face drives the tissue."""
 
     model_config = ConfigDict(extra="forbid")
-    drive: list[str] = Field(
-        default_factory=lambda: list(DRIVE), min_length=1, description="driven feature points"
-    )
-
-    @field_validator("drive")
-    @classmethod
-    def _known(cls, v: list[str]) -> list[str]:
-        unknown = [n for n in v if n not in FEATURE_POINTS]
-        if unknown:
-            raise ValueError(f"{unknown} are not feature points; choose from {FEATURE_POINTS}")
-        return v
+    drive: DriveParams = Field(default_factory=DriveParams, description="skin drive")
+    jaw: JawParams = Field(default_factory=JawParams, description="mandible motion")
 
 
 def simulate_inputs(
-    aligned: Any, mesh: Any, mats: Any, drive: list[str]
-) -> tuple[dict[str, Any], Any, list[str]]:
-    """Arguments of ``physanim.fem.simulate`` from the align, tetra and materials outputs.
-
-    Returns (keyword arguments: nodes, tets, materials, driven_idx (first tracked point per
-    node), driven_traj (T, n_d, 3) m, frame_dt s, fixed_idx (bone-side nodes not driven);
-    skin (N,) bool; names of the n_d driving feature points).
-    """
+    tracked: Any, aligned: Any, mesh: Any, mats: Any, params: SimulateStageParams
+) -> tuple[dict[str, Any], Any]:
+    """Arguments of ``physanim.fem.simulate`` from the track, align, tetra and materials
+    outputs, and the :class:`~physanim.face.drive.FaceDrive` they came from."""
     import numpy as np
 
+    from physanim.face.drive import (
+        estimate_face_jaw,
+        face_drive,
+        fill_gaps,
+        head_frame,
+        kinematic_targets,
+    )
     from physanim.fem.materials import TetMaterials
+    from physanim.mesh.seam import MouthLine, bind_across_seam
 
-    motion = aligned["motion"][...].astype(np.float64)  # (T, V, 3) scan frame
-    names = list(aligned.attrs["landmark_names"])
-    missing = [n for n in drive if n not in names]
-    if missing:
-        raise ValueError(f"simulate.drive: {missing} were not tracked (tracked: {names})")
-    rows = np.array([names.index(n) for n in drive])
-    lm_vertices = aligned["landmark_vertices"][...][rows]
+    names = list(tracked.attrs["names"])
+    rest = tracked["template"][...]
+    traj, _ = fill_gaps(head_frame(tracked["points"][...], tracked["head_pose"][...]))
+    motion = traj - traj[:1]  # displacements from the reference (first) frame
+    mouth = MouthLine(aligned["mouth_line"][...], float(aligned.attrs["lip_band_m"]))
     nodes, tets = mesh["nodes"][...], mesh["tets"][...]
-    driven, first = np.unique(mesh["landmark_node"][...][rows], return_index=True)
+    skin, bone, side = mesh["skin"][...], mesh["bone"][...], mesh["side"][...]
+    jaw = None
+    if params.jaw.enabled:
+        features = list(aligned.attrs["landmark_names"])
+        pronasale = aligned["landmarks"][features.index("pronasale")]
+        jaw, _ = estimate_face_jaw(
+            names, rest, motion, mouth, pronasale, params.jaw, aligned["motion"][...]
+        )
+    targets = None
+    if params.drive.mode == "kinematic":
+        free = np.nonzero(skin & ~bone)[0]
+        binding = bind_across_seam(
+            nodes[free], side[free], aligned["scan_vertices"][...], aligned["scan_faces"][...],
+            mouth,
+        )  # fmt: skip
+        targets = kinematic_targets(
+            binding, aligned["scan_faces"][...], aligned["kinematic"][...].astype(np.float64)
+        )
+    drive = face_drive(
+        nodes, tets, skin, bone, side, mesh["skin_anchor"][...], mouth, jaw, names, rest,
+        motion, params.drive, params.jaw.blend_m, targets,
+    )  # fmt: skip
     args = {
         "nodes": nodes,
         "tets": tets,
         "materials": TetMaterials(*(mats[k][...] for k in ("E", "nu", "eta", "rho"))),
-        "driven_idx": driven,
-        "driven_traj": motion[:, lm_vertices[first]] - motion[:1, lm_vertices[first]],
+        "driven_idx": drive.prescribed,
+        "driven_traj": drive.prescribed_traj,
         "frame_dt": 1.0 / float(aligned.attrs["fps"]),
-        "fixed_idx": np.nonzero(mesh["bone"][...] & ~np.isin(np.arange(len(nodes)), driven))[0],
+        "springs": drive.springs,
     }
-    return args, mesh["skin"][...], [drive[i] for i in first]
+    return args, drive
 
 
 def compute(ctx: StageContext) -> None:
-    """displacements (T,n,3) float32 m, skin displacements, energies (T,) J, von Mises (T,) Pa."""
+    """displacements (T,n,3) float32 m, energies (T,) J, von Mises max and 99th percentile
+    (T,) Pa, the jaw's angle (T,) rad / pivot / axis, the driven and spring nodes."""
     import numpy as np
 
-    from physanim.fem.simulate import simulate
+    from physanim.fem.simulate import hot_spot_ratio, simulate
 
     params: SimulateStageParams = ctx.params  # type: ignore[assignment]
-    args, skin, driven_names = simulate_inputs(
-        ctx.input("align"), ctx.input("tetra"), ctx.input("materials"), params.drive
-    )
+    args, drive = simulate_inputs(
+        ctx.input("track"), ctx.input("align"), ctx.input("tetra"), ctx.input("materials"),
+        params,
+    )  # fmt: skip
     result = simulate(**args, params=params, progress=ctx.progress("simulate"))
     ctx.write_record(result)
-    ctx.write("skin_nodes", np.nonzero(skin)[0])
-    ctx.write("skin_displacements", result.displacements[:, skin])
-    ctx.write("driven_nodes", args["driven_idx"])
-    ctx.out.attrs["driven_landmarks"] = driven_names
-    ctx.summary.update(
-        frames=len(result.displacements),
-        dt_s=result.dt,
-        substeps_per_frame=result.n_substeps,
-        max_displacement_mm=round(float(np.abs(result.displacements).max()) * 1e3, 3),
-        peak_von_mises_kPa=round(float(result.max_von_mises.max()) / 1e3, 3),
-        inverted_tets=int(len(result.inverted_tets)),
-        seconds={k: round(v, 3) for k, v in result.timings.items()},
-    )
+    ctx.write("driven_nodes", drive.prescribed)
+    ctx.write("bone_nodes", drive.bone)
+    ctx.write("mandible_weight", drive.mandible_weight)
+    springs = drive.springs
+    ctx.write("spring_nodes", springs.nodes if springs else np.zeros(0, np.int64))
+    ctx.write("spring_stiffness", springs.stiffness if springs else np.zeros(0))
+    n_skin = int(ctx.input("tetra")["skin"][...].sum())
+    summary: dict[str, Any] = {
+        "frames": len(result.displacements),
+        "dt_s": result.dt,
+        "substeps_per_frame": result.n_substeps,
+        "drive": params.drive.mode,
+        "driving_landmarks": len(drive.landmarks),
+        "spring_node_fraction_of_skin": round(len(springs.nodes) / n_skin, 4) if springs else 0,
+        "max_displacement_mm": round(float(np.abs(result.displacements).max()) * 1e3, 3),
+        "peak_von_mises_kPa": round(float(result.max_von_mises.max()) / 1e3, 3),
+        "peak_to_p99_von_mises": round(hot_spot_ratio(result), 3),
+        "inverted_tets": int(len(result.inverted_tets)),
+        "seconds": {k: round(v, 3) for k, v in result.timings.items()},
+    }
+    if drive.jaw is not None:
+        ctx.write_record(drive.jaw, prefix="jaw")
+        summary["jaw_max_angle_deg"] = round(float(np.degrees(drive.jaw.angle.max())), 3)
+        summary["jaw_pivot_mm"] = [round(float(x) * 1e3, 2) for x in drive.jaw.pivot]
+    ctx.out.attrs["driving_landmarks"] = drive.landmarks
+    if drive.warnings:
+        summary["warnings"] = drive.warnings
+    ctx.summary.update(summary)
 
 
 SPEC = StageSpec(
     name="simulate",
-    upstream=("align", "tetra", "materials"),
+    upstream=("track", "align", "tetra", "materials"),
     params=SimulateStageParams,
-    version="1",
+    version="2",
     compute=compute,
-    doc="viscoelastic FEM (Newmark, partitioned prescribed DOFs) driven by tracked landmarks",
+    doc="viscoelastic FEM (Newmark); skull fixed, mandible turned by the estimated jaw, skin "
+    "pulled by the tracked landmarks",
 )

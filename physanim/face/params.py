@@ -1,6 +1,8 @@
-"""Parameters of the face-model fit stage (``fit``)."""
+"""Parameters of the face-model fit (``fit``) and of how the face drives the FEM (``simulate``)."""
 
 from __future__ import annotations
+
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -33,4 +35,81 @@ class FitParams(BaseModel):
     )
     iterations: int = Field(
         6, ge=1, le=100, description="pose / unit alternations per frame (count)"
+    )
+
+
+class JawParams(BaseModel):
+    """The mandible as a moving boundary of the tissue (``simulate.jaw``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    enabled: bool = Field(
+        True,
+        description="turn the mandible's bone-side nodes with the estimated jaw rotation; "
+        "false fixes every bone-side node (the seed)",
+    )
+    landmarks: list[str] | None = Field(
+        None,
+        description="tracked landmarks that ride on the mandible (default: those lying more "
+        "than margin_m below the mouth line; the fitted model's chin when fewer than 2)",
+    )
+    margin_m: float = Field(
+        0.008, gt=0.0, le=0.05, description="mandible landmarks lie this far below the mouth, m"
+    )
+    blend_m: float = Field(
+        0.008,
+        gt=0.0,
+        le=0.05,
+        description="bone-side nodes blend from skull (at the mouth line) to mandible over this "
+        "height below it, m (measured at the skin in front of them)",
+    )
+    pivot_prior_m: tuple[float, float, float] = Field(
+        (0.0, 0.005, -0.085),
+        description="prior of the jaw (TMJ) axis position relative to the pronasale, m (actor "
+        "frame: +x left, +y up, +z out of the face)",
+    )
+    pivot_prior_std_m: float = Field(
+        0.01, gt=0.0, le=0.1, description="standard deviation of that prior, m"
+    )
+    axis_prior_std_deg: float = Field(
+        10.0, gt=0.0, le=90.0, description="how far the hinge may tilt from left-right, deg"
+    )
+    noise_m: float = Field(
+        5e-4, gt=0.0, le=0.01, description="tracking noise of the mandible landmarks, m"
+    )
+
+
+class DriveParams(BaseModel):
+    """How the tracked face drives the simulated skin (``simulate.drive``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    mode: Literal["landmarks", "kinematic", "prescribed"] = Field(
+        "landmarks",
+        description="'landmarks': each tracked landmark pulls a skin patch by a spring; "
+        "'kinematic': every skin node is pulled towards the kinematic scan; 'prescribed': "
+        "each landmark's nearest skin node follows it exactly (the seed)",
+    )
+    landmarks: list[str] | None = Field(
+        None, description="driving landmarks (default: every tracked landmark but 'exclude')"
+    )
+    exclude: list[str] = Field(
+        default_factory=lambda: ["cphs_L", "cphs_R"],
+        description="landmarks left to the physics (default: the philtrum ridges, whose "
+        "material the regional models edit)",
+    )
+    radius_m: float = Field(
+        0.005, gt=0.0, le=0.05, description="radius of each landmark's skin patch, m"
+    )
+    stiffness_N_per_m: float = Field(
+        2e4, gt=0.0, le=1e9, description="spring stiffness of one landmark's whole patch, N/m"
+    )
+    stiffness_overrides_N_per_m: dict[str, float] = Field(
+        default_factory=dict, description="per-landmark patch stiffness, N/m (name: value)"
+    )
+    kinematic_stiffness_N_per_m2: float = Field(
+        5e6,
+        gt=0.0,
+        le=1e12,
+        description="'kinematic' mode: spring stiffness per skin area, N/m per m^2",
     )

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from physanim.fem.boundary import SpringDrive
 from physanim.fem.corotational import (
     CorotationalNewmark,
     local_displacements,
@@ -36,7 +37,8 @@ class SimResult:
 
     displacements (T, N, 3) float32, m; times (T,) s; kinetic, strain (T,) J;
     dissipated (T,) J, cumulative viscous dissipation since frame 0; max_von_mises (T,) Pa
-    (elastic stress); inverted_count (T,) number of inverted tets per frame;
+    (elastic stress) and its 99th percentile over tets p99_von_mises (T,) Pa (a peak far
+    above it is a stress hot spot); inverted_count (T,) number of inverted tets per frame;
     inverted_tets (K,) ids of tets inverted in any frame; dt: substep used, s;
     n_substeps per frame; timings: seconds spent in 'assembly', 'factorization', 'stepping'.
     """
@@ -47,12 +49,24 @@ class SimResult:
     strain: np.ndarray
     dissipated: np.ndarray
     max_von_mises: np.ndarray
+    p99_von_mises: np.ndarray
     inverted_count: np.ndarray
     inverted_tets: np.ndarray
     dt: float
     n_substeps: int
     timings: dict[str, float] = field(default_factory=dict)
     corot_iterations: np.ndarray | None = None
+
+
+def hot_spot_ratio(result: SimResult, min_fraction: float = 0.05) -> float:
+    """Worst peak / 99th-percentile von Mises ratio over the frames whose peak stress is at
+    least ``min_fraction`` of the run's largest (a stress hot spot makes it large; frames at
+    rest, whose stresses are round-off, do not count)."""
+    vm, p99 = result.max_von_mises, result.p99_von_mises
+    loaded = vm >= min_fraction * vm.max()
+    if not loaded.any() or vm.max() <= 0:
+        return 0.0
+    return float(np.max(vm[loaded] / np.maximum(p99[loaded], 1e-300)))
 
 
 def _node_index(name: str, idx: np.ndarray | None, n_nodes: int) -> np.ndarray:
@@ -70,6 +84,38 @@ def _dofs(idx: np.ndarray) -> np.ndarray:
     return (3 * idx[:, None] + np.arange(3)).ravel()
 
 
+@dataclass(frozen=True)
+class _SpringForce:
+    """Spring forces k_i u_i(t) (N), interpolated between frames like the prescribed motion."""
+
+    springs: SpringDrive
+    positions: np.ndarray  # (3S,) positions of the spring DOFs among the free DOFs
+    dofs: np.ndarray  # (3S,) spring DOFs
+    frame_dt: float
+    n_free: int
+
+    def _at(self, times: np.ndarray) -> np.ndarray:
+        t = self.springs.targets.reshape(len(self.springs.targets), -1)
+        return catmull_rom(t, self.frame_dt, times)[0] * np.repeat(self.springs.stiffness, 3)
+
+    def free(self, times: np.ndarray) -> np.ndarray:
+        """(len(times), n_free) forces on the free DOFs, N."""
+        out = np.zeros((len(times), self.n_free))
+        out[:, self.positions] = self._at(times)
+        return out
+
+    def full(self, time: float, n_dofs: int) -> np.ndarray:
+        """(n_dofs,) forces at one time, N."""
+        out = np.zeros(n_dofs)
+        out[self.dofs] = self._at(np.array([time]))[0]
+        return out
+
+
+def _spring_force(springs: SpringDrive, free: np.ndarray, frame_dt: float) -> _SpringForce:
+    dofs = springs.dofs()
+    return _SpringForce(springs, np.searchsorted(free, dofs), dofs, frame_dt, len(free))
+
+
 def simulate(
     nodes: np.ndarray,
     tets: np.ndarray,
@@ -81,14 +127,17 @@ def simulate(
     params: SimulateParams | None = None,
     progress: Callable[[int, int], None] | None = None,
     model: FemModel | None = None,
+    springs: SpringDrive | None = None,
 ) -> SimResult:
     """Simulate the mesh with driven nodes following trajectories and fixed nodes held.
 
     nodes (N, 3) m; tets (M, 4) positively oriented; materials per tet; driven_idx (n_d,)
     node ids; driven_traj (T, n_d, 3) displacements from rest in m at frame times k frame_dt
     (s), interpolated between frames by Catmull-Rom splines; fixed_idx (n_f,) node ids held at
-    zero displacement. All other nodes are free. The first frame is the static equilibrium
-    for driven_traj[0] (at rest). ``model`` may pass a prebuilt ``build_model`` result.
+    zero displacement. ``springs`` optionally pulls free nodes towards moving targets (soft
+    constraints, same frame times and interpolation). All other nodes are free. The first
+    frame is the static equilibrium for driven_traj[0] and the springs' first targets.
+    ``model`` may pass a prebuilt ``build_model`` result.
     """
     params = params or SimulateParams()
     t0 = time.perf_counter()
@@ -108,6 +157,15 @@ def simulate(
         raise ValueError("driven_idx and fixed_idx share nodes; a node is driven or fixed")
     if not frame_dt > 0:
         raise ValueError(f"frame_dt must be > 0 s, got {frame_dt}")
+    if springs is not None:
+        if len(springs.targets) != len(traj):
+            raise ValueError(
+                f"springs have {len(springs.targets)} frames of targets, driven_traj {len(traj)}"
+            )
+        if np.intersect1d(springs.nodes, np.r_[driven_idx, fixed_idx]).size:
+            raise ValueError("spring nodes must be free: not in driven_idx or fixed_idx")
+        if params.corotational:
+            raise ValueError("springs are not supported with the corotational option")
 
     n_sub = max(1, math.ceil(frame_dt / params.dt - 1e-9))
     h = frame_dt / n_sub
@@ -117,13 +175,20 @@ def simulate(
     values = traj.reshape(n_frames, -1)
 
     t0 = time.perf_counter()
+    stiffness, split = model.K, model.split
+    if springs is not None:
+        k_springs = springs.matrix(model.n_dofs)
+        stiffness = (stiffness + k_springs).tocsr()
+        if split is not None:
+            split = ((split[0] + k_springs).tocsr(), split[1], split[2])
     if params.corotational:
         integ: Newmark = CorotationalNewmark(
             model, h, pres, params.solver, params.corot_rtol, params.corot_max_iter
         )
     else:
-        integ = Newmark(model.K, model.M, model.C, h, pres, params.solver, model.split)
+        integ = Newmark(stiffness, model.M, model.C, h, pres, params.solver, split)
     t_fac = time.perf_counter() - t0
+    force = _spring_force(springs, integ.free, frame_dt) if springs is not None else None
 
     def prescribed(times: np.ndarray):
         d, v, a = catmull_rom(values, frame_dt, times)
@@ -132,17 +197,22 @@ def simulate(
 
     state = State.rest(model.n_dofs)
     d_c, v_c, a_c = (x[0] for x in prescribed(np.zeros(1)))
-    if np.any(d_c):
-        state.d[:] = solve_static(model.K, pres, d_c, solver=params.solver)
+    f0 = None if force is None else force.full(0.0, model.n_dofs)
+    loaded = f0 is not None and bool(np.any(f0))
+    if np.any(d_c) or loaded:
+        state.d[:] = solve_static(stiffness, pres, d_c, f0, solver=params.solver)
     state.v[pres], state.a[pres] = v_c, a_c
-    if np.any(v_c) or np.any(a_c):
-        integ.initial_acceleration(state)
+    if np.any(v_c) or np.any(a_c) or loaded:
+        integ.initial_acceleration(state, f0)
 
     k_diag = model.K.diagonal()[pres]
     e_drive = 0.5 * float(((np.hstack([values, np.zeros((n_frames, n_fix))]) ** 2) @ k_diag).max())
+    if springs is not None:
+        e_springs = 0.5 * ((springs.targets**2).sum(axis=2) @ springs.stiffness).max()
+        e_drive = max(e_drive, float(e_springs))
 
     out = np.zeros((n_frames, n_nodes, 3), dtype=np.float32)
-    kin, pot, diss, vm = (np.zeros(n_frames) for _ in range(4))
+    kin, pot, diss, vm, vm99 = (np.zeros(n_frames) for _ in range(5))
     inv_count = np.zeros(n_frames, dtype=np.int64)
     inverted: set[int] = set()
 
@@ -159,7 +229,8 @@ def simulate(
         else:
             u_loc = d[model.dofs]
             pot[k] = 0.5 * strain_form(d)
-        vm[k] = model.von_mises(u_loc).max()
+        stress = model.von_mises(u_loc)
+        vm[k], vm99[k] = stress.max(), np.percentile(stress, 99)
         bad = np.flatnonzero(signed_volumes(model.nodes + d.reshape(-1, 3), model.tets) <= 0)
         inv_count[k] = bad.size
         inverted.update(bad.tolist())
@@ -174,9 +245,10 @@ def simulate(
         for k in range(1, n_frames):
             times = (k - 1) * frame_dt + h * np.arange(1, n_sub + 1)
             dd, vv, aa = prescribed(times)
+            ff = None if force is None else force.free(times)
             for j in range(n_sub):
                 d_old = state.d.copy()
-                integ.step(state, dd[j], vv[j], aa[j])
+                integ.step(state, dd[j], vv[j], aa[j], None if ff is None else ff[j])
                 if not np.isfinite(state.d).all():
                     node = int(np.abs(d_old).reshape(-1, 3).max(axis=1).argmax())
                     raise SimulationDiverged(
@@ -209,6 +281,7 @@ def simulate(
         strain=pot,
         dissipated=diss,
         max_von_mises=vm,
+        p99_von_mises=vm99,
         inverted_count=inv_count,
         inverted_tets=np.array(sorted(inverted), dtype=np.int64),
         dt=h,
