@@ -17,25 +17,15 @@ from physanim.pipeline import DatasetParams, ProgressFactory, StageContext, Stag
 
 def fingerprint(dataset: DatasetParams, params: BaseModel) -> Mapping[str, object]:
     """Name, size and modification time of exactly the files ingest will read
-    (``source_files``: never the run directory of a dataset-root layout).
-
-    Size + mtime (not a content hash) keeps warm runs fast on recordings of many GB; an edited
-    or regenerated recording changes them.
-    """
+    (``source_files``: never the run directory of a dataset-root layout)."""
     from physanim.capture.ingest import find_source, source_files
+    from physanim.store import files_fingerprint
 
     try:
         kind, path = find_source(dataset.path, params.source)  # type: ignore[attr-defined]
     except (FileNotFoundError, ValueError):
         return {"missing": str(dataset.path)}  # ingest itself reports what is missing
-    files = source_files(kind, path)
-    return {
-        "source": kind,
-        "files": [
-            [str(p.relative_to(dataset.path)), p.stat().st_size, p.stat().st_mtime_ns]
-            for p in files
-        ],
-    }
+    return {"source": kind, "files": files_fingerprint(source_files(kind, path), dataset.path)}
 
 
 def compute(ctx: StageContext) -> None:

@@ -32,10 +32,19 @@ def compute(ctx: StageContext) -> None:
     """panel frames + video + plots of the upstream chain."""
     import numpy as np
 
-    from physanim.mesh.tetra import boundary_faces
+    from physanim.mesh.embed import embedding_matrix
+    from physanim.mesh.kinematic import blend_frames
+    from physanim.mesh.seam import MouthLine
     from physanim.render.face import ColourMap, frontal_camera, render_sequence
     from physanim.render.panel import draw_landmarks, panel, write_mp4
-    from physanim.render.plots import plot_energies, plot_mouth_corners, plot_symmetry_cost
+    from physanim.render.plots import (
+        plot_energies,
+        plot_fidelity,
+        plot_jaw,
+        plot_lip_gap,
+        plot_mouth_corners,
+        plot_symmetry_cost,
+    )
 
     params: RenderParams = ctx.params  # type: ignore[assignment]
     cap, tracked, aligned = ctx.input("ingest"), ctx.input("track"), ctx.input("align")
@@ -45,10 +54,14 @@ def compute(ctx: StageContext) -> None:
 
     scan_v, scan_f = aligned["scan_vertices"][...], aligned["scan_faces"][...]
     camera = frontal_camera(scan_v, size, bar=True)
-    nodes, tets, skin = mesh["nodes"][...], mesh["tets"][...], mesh["skin"][...]
-    outer = boundary_faces(tets)
-    skin_faces = outer[skin[outer].all(axis=1)]
-    disp = sim["displacements"].get_orthogonal_selection((frames, slice(None), slice(None)))
+    # the FEM tile shows the high-res scan embedded in the tets, moved by their displacement
+    nodes, tets = mesh["nodes"][...], mesh["tets"][...]
+    mouth = MouthLine(aligned["mouth_line"][...], float(aligned.attrs["lip_band_m"]))
+    embed = embedding_matrix(
+        scan_v, aligned["scan_side"][...], nodes, tets, mouth.side(nodes[tets].mean(axis=1))
+    )
+    node_disp = sim["displacements"].get_orthogonal_selection((frames, slice(None), slice(None)))
+    disp = blend_frames(embed, node_disp)
     magnitude_mm = np.linalg.norm(disp, axis=-1) * 1e3
     top = params.displacement_max_mm or max(float(magnitude_mm.max()), 1e-3)
     bar = ColourMap("displacement (mm)", clim=(0.0, top))
@@ -66,7 +79,7 @@ def compute(ctx: StageContext) -> None:
             progress=ctx.progress("render kinematic"),
         ),
         "FEM": render_sequence(
-            nodes[None] + disp, skin_faces, scalars=magnitude_mm, colour_map=bar,
+            scan_v[None] + disp, scan_f, scalars=magnitude_mm, colour_map=bar,
             camera=camera, size=size, azimuth_deg=azimuth, progress=ctx.progress("render FEM"),
         ),
     }  # fmt: skip
@@ -111,6 +124,18 @@ def compute(ctx: StageContext) -> None:
     plot_mouth_corners(time_s, mouth, out / "mouth_corners")
     energies = {q: sim[q][...] for q in ("kinetic", "strain", "dissipated")}
     plot_energies(time_s, {"fem": energies}, out / "energies")
+    if "jaw" in sim:
+        plot_jaw(time_s, sim["jaw/angle"][...], sim["jaw/residual_m"][...], out / "jaw")
+    if "lip_gap_truth" in ev:
+        models = ("fem", "kinematic")
+        peaks = {k: float(time_s[v]) for k, v in ev.attrs["summary"]["peak_frames"].items()}
+        plot_fidelity(
+            time_s, {m: ev[f"fidelity_{m}/overall"][...] for m in models},
+            {m: ev[f"fidelity_{m}/regions"][...] for m in models}, list(ev.attrs["regions"]),
+            out / "fidelity", peaks=peaks,
+        )  # fmt: skip
+        gaps = {m: ev[f"lip_gap_{m}"][...] for m in ("truth", *models)}
+        plot_lip_gap(time_s, gaps, out / "lip_gap")
     ctx.summary.update(
         frames=len(frames),
         video=video.name,
@@ -123,7 +148,7 @@ SPEC = StageSpec(
     name="render",
     upstream=("ingest", "track", "align", "tetra", "simulate", "evaluate"),
     params=RenderParams,
-    version="2",
+    version="3",
     compute=compute,
     doc="panel video (capture | fit | kinematic | FEM), symmetry / mouth / energy plots",
 )

@@ -135,3 +135,75 @@ def plot_landmark_curves(
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return _save(fig, stem)
+
+
+def plot_fidelity(
+    time: np.ndarray,
+    overall: Mapping[str, np.ndarray],
+    regions: Mapping[str, np.ndarray],
+    region_names: Sequence[str],
+    stem: str | Path,
+    *,
+    peaks: Mapping[str, float] | None = None,
+) -> tuple[Path, Path]:
+    """Relative displacement error against the truth (0 = moves like the actor, 1 = does not
+    move): the whole face, then one panel per region, one line per model.  ``overall``
+    model -> (T,); ``regions`` model -> (T, R); ``peaks`` name -> time (s) marked by lines."""
+    time = _check_series(time, overall, "overall")
+    panels = ["whole face", *region_names]
+    fig = MplFigure(figsize=(3.2 * len(panels), 3.4))
+    axes = fig.subplots(1, len(panels), sharey=True, squeeze=False)[0]
+    for k, (model, curve) in enumerate(overall.items()):
+        series = [np.asarray(curve), *np.asarray(regions[model]).T]
+        for ax, y in zip(axes, series, strict=True):
+            ax.plot(time, y, lw=1.5, color=f"C{k}", label=model)
+    for ax, title in zip(axes, panels, strict=True):
+        for name, t in (peaks or {}).items():
+            ax.axvline(t, color="0.6", lw=0.8, ls=":")
+            ax.text(t, 1.02, name, fontsize=7, ha="center", transform=ax.get_xaxis_transform())
+        ax.set_title(title.replace("_", " & "), pad=14)
+        ax.set_xlabel("time (s)")
+        ax.set_ylim(0.0, 1.2)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("relative displacement error (-)")
+    axes[0].legend(fontsize=8)
+    return _save(fig, stem)
+
+
+def plot_lip_gap(
+    time: np.ndarray, gaps: Mapping[str, np.ndarray], stem: str | Path
+) -> tuple[Path, Path]:
+    """Distance between the upper and lower lip midline points per model (``gaps`` name ->
+    (T,) m, e.g. truth, FEM, kinematic), in mm vs s."""
+    time = _check_series(time, gaps, "gaps")
+    fig = MplFigure(figsize=(7, 3.4))
+    ax = fig.subplots()
+    for k, (name, gap) in enumerate(gaps.items()):
+        ax.plot(time, 1e3 * np.asarray(gap), lw=1.5, color=f"C{k}", label=name)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("lip gap (mm)")
+    ax.set_title("Lip gap: upper to lower lip midline")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, stem)
+
+
+def plot_jaw(
+    time: np.ndarray, angle: np.ndarray, residual: np.ndarray, stem: str | Path
+) -> tuple[Path, Path]:
+    """Estimated jaw opening angle (T,) rad and the RMS misfit (T,) m of the mandible points
+    about the fitted hinge, in degrees and mm vs s."""
+    time = _check_series(time, {"angle": angle, "residual": residual}, "jaw")
+    fig = MplFigure(figsize=(9, 3.2))
+    a, b = fig.subplots(1, 2)
+    a.plot(time, np.degrees(angle), lw=1.5, color="C0")
+    a.set_title("Jaw opening about the estimated hinge")
+    a.set_xlabel("time (s)")
+    a.set_ylabel("angle (deg)")
+    b.plot(time, 1e3 * np.asarray(residual), lw=1.5, color="C3")
+    b.set_title("Misfit of the mandible points")
+    b.set_xlabel("time (s)")
+    b.set_ylabel("RMS residual (mm)")
+    for ax in (a, b):
+        ax.grid(alpha=0.3)
+    return _save(fig, stem)

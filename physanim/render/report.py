@@ -158,6 +158,7 @@ def build_report(
     stage_table: Sequence[Mapping[str, Any]] = (),
     variants: Mapping[str, Mapping[str, Any]] | None = None,
     galleries: Mapping[str, Sequence[tuple[str, str | Path]]] | None = None,
+    tables: Mapping[str, tuple[Sequence[str], Sequence[Sequence[Any]]]] | None = None,
     subtitle: str = "",
 ) -> Path:
     """Write ``out_dir/index.html`` and return its path.
@@ -190,6 +191,9 @@ def build_report(
     if key_figures:
         table = _table(("figure", "value"), list(key_figures.items()))
         parts.append(f"<h2>Key figures</h2><section class='card'>{table}</section>")
+    for heading, (header, rows) in (tables or {}).items():
+        card = _table(header, rows)
+        parts.append(f"<h2>{_e(heading)}</h2><section class='card'>{card}</section>")
     if variants:
         parts.append(f"<h2>Variants</h2><section class='card'>{_variants(variants)}</section>")
     if galleries:

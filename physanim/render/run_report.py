@@ -37,11 +37,21 @@ def write_run_report(
     images = [
         (caption, render / f"{stem}.png")
         for caption, stem in (
+            ("Motion fidelity against the truth, per region (0 = moves like the actor)",
+             "fidelity"),
+            ("Lip gap: truth, FEM, kinematic scan", "lip_gap"),
+            ("Jaw opening estimated from the tracked mandible landmarks", "jaw"),
             ("Symmetry cost (tracked, kinematic, FEM)", "symmetry"),
             ("Mouth-corner displacement", "mouth_corners"),
             ("FEM energies", "energies"),
         )
-    ]
+        if (render / f"{stem}.png").exists()
+    ]  # fmt: skip
+    evaluated = store.provenance("evaluate", keys["evaluate"]).get("summary", {})
+    jaw_peak = evaluated.get("peak_frames", {}).get("jaw_open")
+    if jaw_peak is not None and (render / "frames" / f"{jaw_peak:04d}.png").exists():
+        images.insert(0, (f"Panel at the jaw-drop peak (frame {jaw_peak})",
+                          render / "frames" / f"{jaw_peak:04d}.png"))  # fmt: skip
     regions = store.files("materials", keys["materials"]) / "regions.png"
     if regions.exists():
         images.append(("Material regions", regions))
@@ -58,12 +68,20 @@ def write_run_report(
         cost[label] = ev["fem/cost"][...]
         mouth[label] = ev["fem/displacement"][...][:, ch]
         fem = summary.get("fem", {})
+        fidelity = summary.get("fidelity", {}).get("fem", {})
+        philtrum = summary.get("philtrum_peak_mm", {})
         variants[label] = {
             "mean symmetry cost": fem.get("mean_symmetry_cost"),
             "peak mouth corner L/R (mm)": fem.get("peak_mouth_corner_mm"),
-            "truth RMS FEM / kinematic (mm)": [
-                summary.get("truth_rms_mm", {}).get("fem"),
-                summary.get("truth_rms_mm", {}).get("kinematic"),
+            "right / left philtrum peak (mm)": [philtrum.get("right"), philtrum.get("left")],
+            **{
+                f"FEM relative displacement error, {peak} peak": value.get("overall")
+                for peak, value in fidelity.items()
+                if isinstance(value, dict)
+            },
+            "surface distance RMS FEM / kinematic (mm)": [
+                summary.get("surface_distance_rms_mm", {}).get("fem"),
+                summary.get("surface_distance_rms_mm", {}).get("kinematic"),
             ],
             "free-region lag (s)": summary.get("free_lag_s"),
         }
@@ -101,6 +119,9 @@ def write_run_report(
         )
     return build_report(
         out_dir,
+        tables=capture_tables(
+            evaluated, store.provenance("simulate", keys["simulate"]).get("summary", {})
+        ),
         title=title,
         video=render / "panel.mp4",
         images=images,
@@ -109,3 +130,37 @@ def write_run_report(
         variants=variants,
         subtitle=f"store {store.root}",
     )
+
+
+def capture_tables(evaluated: dict[str, Any], simulated: dict[str, Any]) -> dict[str, Any]:
+    """The report's "does the simulated face perform the capture?" table from the evaluate
+    and simulate summaries: relative displacement error of the FEM and the kinematic scan at
+    each peak frame (whole face and per region), the lip gap against the truth, stress hot
+    spots and how much of the skin the drive holds.  Empty without ground truth."""
+    fidelity = evaluated.get("fidelity")
+    if not fidelity:
+        return {}
+    rows: list[list[Any]] = []
+    peaks = evaluated.get("peak_frames", {})
+    for peak, frame in peaks.items():
+        for part in fidelity["fem"][peak]:
+            rows.append([
+                f"relative displacement error at the {peak} peak (frame {frame}), "
+                + ("whole face" if part == "overall" else part.replace("_", " & ")),
+                fidelity["fem"][peak][part], fidelity["kinematic"][peak][part],
+                "<= 0.15" if part == "overall" else "",
+            ])  # fmt: skip
+    rows.append(["worst frame's relative displacement error", fidelity["fem"]["worst"],
+                 fidelity["kinematic"]["worst"], ""])  # fmt: skip
+    gaps = evaluated.get("lip_gap_mm", {})
+    for peak in peaks:
+        truth = gaps.get("truth", {}).get(peak)
+        rows.append([f"lip gap at the {peak} peak (mm; truth {truth})",
+                     gaps.get("fem", {}).get(peak), gaps.get("kinematic", {}).get(peak),
+                     f"within 15 % of {truth}" if peak == "jaw_open" else ""])  # fmt: skip
+    rows.append(["peak / 99th-percentile von Mises stress (worst frame)",
+                 simulated.get("peak_to_p99_von_mises"), "", "<= 5"])  # fmt: skip
+    rows.append(["fraction of the skin nodes the drive holds",
+                 simulated.get("spring_node_fraction_of_skin"), "", "<= 0.25"])  # fmt: skip
+    header = ("measure", "FEM", "kinematic scan", "target")
+    return {"Does the simulated face perform the capture?": (header, rows)}

@@ -1,6 +1,6 @@
 """Content-addressed Zarr store of stage outputs (see stage_store for the layout)."""
 
-from physanim.store.keys import canonical_json, stage_key
+from physanim.store.keys import canonical_json, files_fingerprint, stage_key
 from physanim.store.stage_store import (
     StageOutputMissing,
     StageStore,
@@ -14,6 +14,7 @@ __all__ = [
     "StageOutputMissing",
     "StageStore",
     "canonical_json",
+    "files_fingerprint",
     "frame_chunks",
     "read_dataclass",
     "stage_key",

@@ -5,7 +5,8 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
+from pathlib import Path
 from typing import Any
 
 
@@ -42,3 +43,13 @@ def stage_key(
         {"stage": stage, "version": version, "params": dict(params), "upstream": dict(upstream)}
     )
     return hashlib.sha256(payload.encode("ascii")).hexdigest()
+
+
+def files_fingerprint(files: Iterable[Path], root: Path) -> list[list[object]]:
+    """[path relative to ``root``, size bytes, mtime ns] of each file: what an input-file
+    fingerprint needs (size + mtime, not a content hash, keeps warm runs fast on large
+    recordings; an edited or regenerated file changes them)."""
+    return [
+        [p.relative_to(root).as_posix(), p.stat().st_size, p.stat().st_mtime_ns]
+        for p in sorted(files)
+    ]
