@@ -34,7 +34,9 @@ from physanim.store import StageOutputMissing, StageStore
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help=__doc__, pretty_exceptions_enable=False
 )
-console = Console(stderr=True)
+console = Console(stderr=True, soft_wrap=True)  # messages stay one line (no wrapping)
+#: set by ``main`` from --debug / PHYSANIM_DEBUG: errors show their tracebacks
+DEBUG = False
 
 PipelineOpt = Annotated[
     str, typer.Option("--pipeline", "-p", help="DAG: face, ..., or package.module:ATTRIBUTE")
@@ -155,8 +157,11 @@ def run(
     local: Annotated[
         bool, typer.Option("--local", help="run stages in this process without Prefect")
     ] = False,
+    verify: Annotated[
+        bool, typer.Option("--verify", help="check cached outputs' checksums, recompute damage")
+    ] = False,
 ) -> None:
-    """Run the DAG (or part of it); cached stages are reused."""
+    """Run the DAG (or part of it); cached stages are reused, damaged ones recomputed."""
     t0 = time.perf_counter()
     dag = _pipeline(pipeline)
     cfg = load(dag, config, set_, dataset)
@@ -168,7 +173,7 @@ def run(
             made = dag.prepare(cfg, progress)
         if made:
             console.print(f"generated {made}")
-    store, entries = _plan(dag, cfg, only, start, force)
+    store, entries = _plan(dag, cfg, only, start, force, checksums=verify)
     for leftover in store.remove_stale_temporaries():
         console.print(f"removed abandoned partial output {leftover.name}")
     for e in entries:
@@ -187,8 +192,13 @@ def run(
     try:
         _execute(dag, cfg, store, entries, local=local or not todo, info=info)
     except StageFailed as exc:
+        if DEBUG:
+            raise
         cause = exc.__cause__
-        text = f"stage '{exc.stage}' failed: {_describe(cause)}" if _is_io(cause) else str(exc)
+        where = str(store.root)
+        text = (
+            f"stage '{exc.stage}' failed: {_describe(cause, where)}" if _is_io(cause) else str(exc)
+        )
         _fail(text)
         console.print("(outputs of the stages before it are kept; fix and run again)")
         raise typer.Exit(1) from None
@@ -239,9 +249,11 @@ def _execute(
 
 
 def _tidy_up() -> None:
-    """Stop processes and remove temporary folders that killed physanim runs left behind."""
-    from physanim.processes import remove_stale_temp_dirs, stop_orphans
+    """Stop processes and remove temporary folders that killed physanim runs left behind;
+    mark the processes this one starts as its own (so a later run can do the same for it)."""
+    from physanim.processes import mark_children, remove_stale_temp_dirs, stop_orphans
 
+    mark_children()
     for line in stop_orphans():
         console.print(line, highlight=False)
     for folder in remove_stale_temp_dirs():
@@ -302,7 +314,7 @@ def verify(
     note = f"; {quarantined} damaged output(s) in {store.root / '.quarantine'}" * bool(quarantined)
     print(f"{checked} output(s) checked in {store.root}, {damaged} damaged{note}")
     if damaged:
-        print("`physanim run` moves damaged outputs aside and recomputes the ones it needs")
+        print("`physanim run --verify` moves damaged outputs aside and recomputes those it needs")
         raise typer.Exit(1)
 
 
@@ -456,6 +468,12 @@ def sweep(
     except ConfigError as exc:
         raise _fail(str(exc)) from None
     pipeline = _pipeline(spec.pipeline)
+    for v in variants:  # every variant is valid before anything starts
+        try:
+            files = [pipeline.default_config, *v.configs]
+            cfg, _ = load_config(pipeline.config_model(), files, v.overrides)
+        except ConfigError as exc:
+            raise _fail(f"{file}: variant {v.name!r}: {exc}") from None
     cfg = load(pipeline, list(map(Path, variants[0].configs)), list(variants[0].overrides), None)
     _tidy_up()
     from flows.prefect_env import configure
@@ -523,16 +541,16 @@ def _is_io(exc: BaseException | None) -> bool:
     return isinstance(exc, OSError) and exc.errno is not None
 
 
-def _describe(exc: BaseException | None) -> str:
-    """One line for an error: what failed, on which file, and what to do."""
+def _describe(exc: BaseException | None, where: str = "the store") -> str:
+    """One line for an error: what failed, on which file (else ``where``), and what to do."""
     if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
         return (
-            f"no space left writing {exc.filename or 'the store'} ({exc.strerror}); the "
+            f"no space left writing {exc.filename or where} ({exc.strerror}); the "
             "partial output was discarded, the store is unchanged: free space and run again"
         )
     if isinstance(exc, OSError) and exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
         return (
-            f"cannot write {exc.filename or 'the store'} ({exc.strerror}): make the store "
+            f"cannot write {exc.filename or where} ({exc.strerror}): make the store "
             "writable, or give another dataset directory with --dataset"
         )
     if isinstance(exc, OSError) and exc.errno is not None:
@@ -545,7 +563,8 @@ def _describe(exc: BaseException | None) -> str:
 def main() -> None:
     """Console-script entry point: errors become one line unless --debug (anywhere) or
     PHYSANIM_DEBUG=1 asks for the traceback."""
-    debug = "--debug" in sys.argv[1:] or os.environ.get("PHYSANIM_DEBUG", "") not in ("", "0")
+    global DEBUG
+    DEBUG = "--debug" in sys.argv[1:] or os.environ.get("PHYSANIM_DEBUG", "") not in ("", "0")
     sys.argv = [sys.argv[0], *(a for a in sys.argv[1:] if a != "--debug")]
     try:
         sys.exit(app())
@@ -553,7 +572,7 @@ def main() -> None:
         console.print("interrupted")
         sys.exit(130)
     except Exception as exc:
-        if debug:
+        if DEBUG:
             raise
         _fail(_describe(exc))
         sys.exit(1)

@@ -101,14 +101,20 @@ def record_run(
     info: Mapping[str, Any] | None = None,
     *,
     latest: bool = True,
-) -> str:
+) -> str | None:
     """Write the run manifest of a run: the planned keys (stage -> key) whose output exists.
 
     ``complete`` in the manifest says whether every stage of the pipeline has its output;
-    ``latest`` makes it the store's LATEST run.  Returns the manifest's name.
+    ``latest`` makes it the store's LATEST run.  Returns the manifest's name (None: no output
+    exists, nothing is recorded).  Outputs of a store from before run manifests are first
+    recorded as runs of their own.
     """
     keys = {stage: key for stage, key in planned.items() if store.has(stage, key)}
-    complete = all(s.name in keys for s in pipeline.stages)
+    if not keys:
+        return None
+    stages = [s.name for s in pipeline.stages]
+    store.adopt_unrecorded(pipeline.name, stages)
+    complete = all(s in keys for s in stages)
     facts = {"pipeline": pipeline.name, "complete": complete, **(info or {})}
     return store.record_run(keys, facts, latest=latest)
 

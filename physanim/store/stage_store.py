@@ -201,6 +201,8 @@ class StageStore:
         self.root = Path(root)
         self._host = socket.gethostname()
         if create:
+            if not (self.root / "zarr.json").exists():  # a new store records runs from the start
+                (self.root / RUNS).mkdir(parents=True, exist_ok=True)
             _ensure_group(self.root)
             (self.root / TMP).mkdir(exist_ok=True)
 
@@ -259,8 +261,9 @@ class StageStore:
 
         Raises StageOutputDamaged (naming the array and chunk) when files of it are missing.
         """
-        if key is None:
-            key = self.latest(stage)
+        if key is None:  # the latest run's output, even damaged (then say so)
+            recorded = (r.keys[stage] for r in self.runs() if stage in r.keys)
+            key = next(recorded, None) or self.latest(stage)
             if key is None:
                 raise StageOutputMissing(f"stage '{stage}' has no output in {self.root}")
         problem = self.damage(stage, key)
@@ -349,6 +352,21 @@ class StageStore:
             _write_atomic(self.root / LATEST, name + "\n")
         return name
 
+    def adopt_unrecorded(self, pipeline: str, stages: Iterable[str]) -> None:
+        """Give a store written before run manifests existed one run (not the latest) per
+        output that no other output was computed from, with the outputs it was computed from;
+        ``complete`` when those cover ``stages``.  Does nothing once the store has runs."""
+        if (self.root / RUNS).exists():
+            return
+        (self.root / RUNS).mkdir()
+        outputs = [(s, k) for s in self.stages() for k in self.keys(s)]
+        used = {u for s, k in outputs for u in self.provenance(s, k).get("upstream", {}).items()}
+        wanted = set(stages)
+        for leaf in (o for o in outputs if o not in used):
+            keys = dict(sorted(self.closure([leaf])))
+            info = {"pipeline": pipeline, "complete": wanted <= set(keys), "adopted": True}
+            self.record_run(keys, info, latest=False)
+
     def remove_run(self, name: str) -> None:
         """Delete one run manifest (never the latest run's)."""
         if name != self.latest_run_name():
@@ -397,6 +415,11 @@ class StageStore:
                 }
             )
             self._commit(tmp, stage, key, replace)
+        except OSError as exc:
+            shutil.rmtree(tmp, ignore_errors=True)
+            if exc.filename is None and exc.errno is not None:  # name what failed to be written
+                raise OSError(exc.errno, exc.strerror, str(tmp)) from exc
+            raise
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
