@@ -30,6 +30,7 @@ from physanim.config import ConfigError, load_config
 from physanim.pipeline import Pipeline, PlanEntry, StageFailed, StageResult, make_plan
 from physanim.pipeline.spec import dataset_overrides
 from physanim.store import StageOutputMissing, StageStore
+from physanim.store.stage_store import QUARANTINE
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help=__doc__, pretty_exceptions_enable=False
@@ -310,9 +311,11 @@ def verify(
             if problem is not None:
                 damaged += 1
                 print(f"damaged: {stage}/{key[:12]}: {problem}")
-    quarantined = len([p for p in store.quarantined() if p.is_dir()])
-    note = f"; {quarantined} damaged output(s) in {store.root / '.quarantine'}" * bool(quarantined)
-    print(f"{checked} output(s) checked in {store.root}, {damaged} damaged{note}")
+    line = f"{checked} output(s) checked in {store.root}, {damaged} damaged"
+    quarantined = [p for p in store.quarantined() if p.is_dir()]
+    if quarantined:
+        line += f"; {len(quarantined)} moved aside earlier to {store.root / QUARANTINE}"
+    print(line)
     if damaged:
         print("`physanim run --verify` moves damaged outputs aside and recomputes those it needs")
         raise typer.Exit(1)
@@ -395,11 +398,11 @@ def clean(
     d = _pipeline(pipeline)
     cfg = load(d, config, set_, dataset)
     store, entries = _plan(d, cfg, None, None, None, create=False)
+    store.adopt_unrecorded(d.name, [s.name for s in d.stages])  # a store from before runs
     latest = store.latest_run_name()
     kept_runs = [r for r in store.runs() if r.name == latest or r.info.get("complete")]
     keep = {(e.stage, e.key) for e in entries}
     keep |= {item for r in kept_runs for item in r.keys.items()}
-    keep |= {(s, k) for s in store.stages() if (k := store.latest(s)) is not None}
     verb = "would remove" if dry_run else "removing"
     doomed = store.unreachable(keep)
     for stage, key in doomed:
@@ -412,7 +415,8 @@ def clean(
         print(f"{verb} damaged {stage}/{key[:12]} ({problem})")
         if not dry_run:
             store.remove(stage, key)
-    runs = [r.name for r in store.runs() if r not in kept_runs]
+    kept_names = {r.name for r in kept_runs}
+    runs = [r.name for r in store.runs() if r.name not in kept_names]
     for name in runs:
         print(f"{verb} run manifest {name} (an incomplete run, not the latest)")
         if not dry_run:
@@ -425,7 +429,10 @@ def clean(
     if not dry_run:
         store.remove_stale_temporaries()
         for p in quarantined:
-            shutil.rmtree(p) if p.is_dir() else p.unlink()
+            if p.is_dir():
+                shutil.rmtree(p)
+            else:
+                p.unlink()
     if not (doomed or damaged or runs or stale or quarantined):
         print("nothing to clean")
 

@@ -356,7 +356,7 @@ class StageStore:
         """Give a store written before run manifests existed one run (not the latest) per
         output that no other output was computed from, with the outputs it was computed from;
         ``complete`` when those cover ``stages``.  Does nothing once the store has runs."""
-        if (self.root / RUNS).exists():
+        if (self.root / RUNS).exists() or not (self.root / "zarr.json").exists():
             return
         (self.root / RUNS).mkdir()
         outputs = [(s, k) for s in self.stages() for k in self.keys(s)]

@@ -3,7 +3,9 @@ upstream of everything the latest run and the report use."""
 
 from __future__ import annotations
 
+import json
 import re
+import shutil
 from pathlib import Path
 
 from flows.dags import FACE
@@ -65,6 +67,32 @@ def test_clean_keeps_the_latest_and_reported_runs_with_their_upstream(
     assert not store.has("scale", scale3[0]) and len(store.runs()) == 2
     assert all(store.has(s, k) for r in store.runs() for s, k in r.keys.items())
     assert_store_tells_the_truth(store)
+
+
+def test_a_store_from_before_manifests_keeps_its_variants(toy_config: Path, tmp_path: Path) -> None:
+    """Outputs without manifests and per-stage LATEST pointers (the earlier format) read as
+    they are; the first clean or run records each final output's chain as a run, so clean
+    keeps both variants and the report would show them."""
+    args = ["-p", TOY, "-c", str(toy_config), "--local"]
+    for factor in (2, 5):
+        assert invoke("run", *args, "--set", f"scale.factor={factor}").returncode == 0
+    store = StageStore(tmp_path / "data" / "runs" / "store.zarr")
+    for stage in store.stages():  # back to the earlier format
+        for key in store.keys(stage):
+            meta = store.root / stage / key / "zarr.json"
+            tree = json.loads(meta.read_text())
+            del tree["attributes"]["manifest"]
+            meta.write_text(json.dumps(tree))
+        (store.root / stage / "LATEST").write_text(store.latest(stage) + "\n")
+    shutil.rmtree(store.root / ".runs")
+    (store.root / "LATEST").unlink()
+    assert store.provenance("scale")["params"]["factor"] == 5  # the per-stage pointer
+    assert invoke("verify", *args[:-1]).returncode == 0
+    assert invoke("clean", *args[:-1]).stdout.strip() == "nothing to clean"
+    assert sorted(r.info["complete"] for r in store.runs()) == [True, True]
+    assert len(store.keys("total")) == 2
+    assert invoke("run", *args).returncode == 0  # factor 2: its adopted run becomes LATEST
+    assert len(store.runs()) == 2 and store.provenance("scale")["params"]["factor"] == 2
 
 
 def test_clean_after_variants_face_sequence(face_copy: Path) -> None:
