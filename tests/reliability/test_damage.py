@@ -102,12 +102,13 @@ def test_deleted_chunk_of_a_face_output(face_copy: Path) -> None:
     damaged, ``--only evaluate --force evaluate`` refuses (no frames read as zeros) and a
     plain run recomputes simulate to the same displacements; evaluate's results stand."""
     store = StageStore(ROOT / face_copy / "runs" / "store.zarr")
-    key, evaluated = store.latest("simulate"), store.latest("evaluate")
+    args = ["--dataset", str(face_copy), "-c", COARSE]
+    rows = status(*args)
+    key, evaluated = rows["simulate"]["key"], rows["evaluate"]["key"]
     before = store.open("simulate", key)["displacements"][...]
     cost = store.open("evaluate", evaluated)["fem/cost"][...]
     chunk = store.root / "simulate" / key / "displacements" / "c" / "0" / "0" / "0"
     chunk.unlink()
-    args = ["--dataset", str(face_copy), "-c", COARSE]
     rows = status(*args)
     assert rows["simulate"]["damaged"] == "array 'displacements' chunk c/0/0/0 is missing"
     refused = invoke("run", *args, "--local", "--only", "evaluate", "--force", "evaluate")

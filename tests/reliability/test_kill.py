@@ -50,9 +50,10 @@ def test_kill9_in_a_forced_face_stage_keeps_the_old_output(face_copy: Path) -> N
     """``--force simulate`` killed while simulate computes: the old output is still there,
     intact and unchanged; the next run removes the partial copy and has nothing to do."""
     store = StageStore(ROOT / face_copy / "runs" / "store.zarr")
+    args = ["--dataset", str(face_copy), "-c", COARSE]
+    assert invoke("run", *args, "--local").returncode == 0  # the latest run: this config's
     key = store.latest("simulate")
     before = store.provenance("simulate", key)["manifest"]
-    args = ["--dataset", str(face_copy), "-c", COARSE]
     proc = start("run", *args, "--local", "--force", "simulate")
     deadline = time.time() + 120
     while not list((store.root / TMP).glob("simulate-*")) and time.time() < deadline:
