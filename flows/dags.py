@@ -9,6 +9,8 @@ these DAGs as a Prefect flow named ``physanim-<dag>``, one task per stage.
 from __future__ import annotations
 
 import importlib
+import os
+import sys
 from pathlib import Path
 
 from pydantic import BaseModel
@@ -16,6 +18,7 @@ from pydantic import BaseModel
 from physanim.capture.params import DemoParams
 from physanim.pipeline import Pipeline, PlanEntry
 from physanim.store import StageStore
+from physanim.store.stage_store import LATEST
 from tasks import (
     align,
     arm_render,
@@ -38,14 +41,14 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 def face_report(store: StageStore, entries: list[PlanEntry], config: BaseModel) -> Path | None:
     """The face run's HTML report in ``<run dir>/report/`` (variants side by side).
 
-    Rebuilt when a stage ran or the latest render changed since it was written, so a warm run
+    Rebuilt when a stage ran or the latest run changed since it was written, so a warm run
     that changes nothing costs nothing here.
     """
     from physanim.render.run_report import write_run_report
 
     dataset = config.dataset  # type: ignore[attr-defined]
     out = dataset.run_dir / "report"
-    index, pointer = out / "index.html", store.root / "render" / "LATEST"
+    index, pointer = out / "index.html", store.root / LATEST
     fresh = index.exists() and (
         not pointer.exists() or pointer.stat().st_mtime <= index.stat().st_mtime
     )
@@ -89,10 +92,23 @@ PIPELINES: dict[str, Pipeline] = {p.name: p for p in (FACE, ARM, KEYFRAME)}
 
 
 def get_pipeline(name: str) -> Pipeline:
-    """A pipeline by name (``face``...) or by import path ``package.module:ATTRIBUTE``."""
+    """A pipeline by name (``face``...) or by import path ``package.module:ATTRIBUTE``
+    (importable from the working directory too); ValueError saying what is wrong otherwise."""
     if ":" in name:
         module, attr = name.split(":", 1)
-        return getattr(importlib.import_module(module), attr)
+        if os.getcwd() not in sys.path:
+            sys.path.append(os.getcwd())
+        try:
+            found = getattr(importlib.import_module(module), attr)
+        except ImportError as exc:
+            raise ValueError(f"-p {name}: cannot import {module!r}: {exc}") from None
+        except AttributeError:
+            raise ValueError(f"-p {name}: module {module!r} has no {attr!r}") from None
+        if not isinstance(found, Pipeline):
+            raise ValueError(
+                f"-p {name}: {attr!r} is a {type(found).__name__}, not a physanim.pipeline.Pipeline"
+            )
+        return found
     if name not in PIPELINES:
         raise ValueError(f"unknown pipeline {name!r}; known: {', '.join(PIPELINES)}")
     return PIPELINES[name]

@@ -18,6 +18,8 @@ import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
+from physanim.processes import mark_children
+
 #: Settings applied unless the user already set them in the environment.
 DEFAULTS = {
     "PREFECT_SERVER_ANALYTICS_ENABLED": "false",  # offline: telemetry only logs errors
@@ -30,7 +32,12 @@ DEFAULTS = {
 
 
 def configure(run_dir: Path) -> Path:
-    """Set Prefect's home inside ``run_dir`` (unless PREFECT_HOME is set); returns the home."""
+    """Set Prefect's home inside ``run_dir`` (unless PREFECT_HOME is set); returns the home.
+
+    Also marks the processes started from now on (Prefect's temporary API server, Dask
+    workers) as this process's, so that the next run stops them if this one is killed.
+    """
+    mark_children()
     if "prefect" in sys.modules:  # settings are read at import: too late to change them
         return Path(os.environ.get("PREFECT_HOME", "~/.prefect")).expanduser()
     home = Path(os.environ.setdefault("PREFECT_HOME", str(Path(run_dir).resolve() / "prefect")))

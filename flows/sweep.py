@@ -24,8 +24,8 @@ from prefect.cache_policies import NONE
 from prefect_dask import DaskTaskRunner
 
 from flows.dags import get_pipeline
-from physanim.config import load_config
-from physanim.pipeline import Pipeline, StageResult, execute_stage, make_plan
+from physanim.config import ConfigError, load_config
+from physanim.pipeline import Pipeline, StageResult, execute_stage, make_plan, record_run
 from physanim.pipeline.sweep import Job, Variant, load_sweep, merge_plans
 from physanim.render.sweep_report import SweepVariant, write_sweep_report
 from physanim.store import StageStore
@@ -76,9 +76,12 @@ def plan_sweep(
     configs: dict[str, Any] = {}
     plans = {}
     for v in variants:
-        cfg, _ = load_config(
-            pipeline.config_model(), [pipeline.default_config, *v.configs], v.overrides
-        )
+        try:
+            cfg, _ = load_config(
+                pipeline.config_model(), [pipeline.default_config, *v.configs], v.overrides
+            )
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: variant {v.name!r}: {exc}") from None
         store = StageStore(cfg.dataset.store_path)  # type: ignore[attr-defined]
         store.remove_stale_temporaries()
         configs[v.name] = cfg
@@ -246,11 +249,14 @@ def _record_sweep(
     seconds: float,
     run_dir: Path,
 ) -> tuple[Path, Path]:
-    """Write the sweep's summary.json and report (HTML); returns their paths."""
+    """Record each variant as a run of its store (not the latest), write the sweep's
+    summary.json and report (HTML); returns their paths."""
     report_variants = []
     for v in variants:
         store = StageStore(configs[v.name].dataset.store_path)
         done = {stage: key for stage, key in keys[v.name].items() if store.has(stage, key)}
+        info = {"sweep": str(path), "variant": v.name, "configs": list(v.configs)}
+        record_run(store, pipeline, done, {**info, "overrides": list(v.overrides)}, latest=False)
         report_variants.append(
             SweepVariant(
                 name=v.name,

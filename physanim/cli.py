@@ -1,35 +1,43 @@
-"""The ``physanim`` command line: run, status, dag, show, clean.
+"""The ``physanim`` command line: run, status, verify, dag, show, clean, demo, sweep, serve.
 
 The CLI is the application's entry point: it loads the DAG declarations from ``tasks/`` and,
 for ``run``, the Prefect flow from ``flows/`` (imported lazily, so ``status``, ``dag``, ``show``
-and ``clean`` never need Prefect).
+and ``clean`` never need Prefect).  Errors are one line; ``--debug`` anywhere on the command
+line (or PHYSANIM_DEBUG=1) shows their tracebacks.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Annotated
 
 import typer
 from pydantic import BaseModel
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from physanim.config import ConfigError, load_config
 from physanim.pipeline import Pipeline, PlanEntry, StageFailed, StageResult, make_plan
 from physanim.pipeline.spec import dataset_overrides
 from physanim.store import StageOutputMissing, StageStore
+from physanim.store.stage_store import QUARANTINE
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help=__doc__, pretty_exceptions_enable=False
 )
-console = Console(stderr=True)
+console = Console(stderr=True, soft_wrap=True)  # messages stay one line (no wrapping)
+#: set by ``main`` from --debug / PHYSANIM_DEBUG: errors show their tracebacks
+DEBUG = False
 
 PipelineOpt = Annotated[
     str, typer.Option("--pipeline", "-p", help="DAG: face, ..., or package.module:ATTRIBUTE")
@@ -52,13 +60,26 @@ ForceOpt = Annotated[
 ]
 
 
+def _fail(message: str, code: int = 2) -> typer.Exit:
+    """Print ``error: message`` (one line, no markup interpretation); returns the Exit to raise."""
+    console.print(f"[red]error:[/red] {escape(message)}", highlight=False)
+    return typer.Exit(code)
+
+
 def _pipeline(name: str) -> Pipeline:
     from flows.dags import get_pipeline
 
     try:
         return get_pipeline(name)
     except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from None
+        raise _fail(str(exc)) from None
+
+
+def _stage(pipeline: Pipeline, name: str) -> None:
+    try:
+        pipeline.stage(name)
+    except ValueError as exc:
+        raise _fail(str(exc)) from None
 
 
 def load(
@@ -70,9 +91,14 @@ def load(
     try:
         config, _ = load_config(pipeline.config_model(), files, overrides)
     except ConfigError as exc:
-        console.print(f"[red]error:[/red] {exc}", highlight=False)
-        raise typer.Exit(2) from None
+        raise _fail(str(exc)) from None
     return config
+
+
+def _store(config: BaseModel, *, create: bool = True) -> StageStore:
+    """The config's stage store; ``create=False`` for commands that only read (nothing is
+    created, not even a missing dataset directory)."""
+    return StageStore(config.dataset.store_path, create=create)  # type: ignore[attr-defined]
 
 
 def _plan(
@@ -81,14 +107,25 @@ def _plan(
     only: str | None,
     start: str | None,
     force: list[str] | None,
+    *,
+    create: bool = True,
+    checksums: bool = False,
 ) -> tuple[StageStore, list[PlanEntry]]:
-    store = StageStore(config.dataset.store_path)  # type: ignore[attr-defined]
+    store = _store(config, create=create)
     try:
-        entries = make_plan(pipeline, config, store, only=only, start=start, force=force or ())
+        entries = make_plan(
+            pipeline, config, store, only=only, start=start, force=force or (), checksums=checksums
+        )
     except ValueError as exc:
-        console.print(f"[red]error:[/red] {exc}", highlight=False)
-        raise typer.Exit(2) from None
+        raise _fail(str(exc)) from None
     return store, entries
+
+
+def _action(e: PlanEntry) -> str:
+    """What the plan does with a stage, as ``status`` says it."""
+    if e.action == "run":
+        return "damaged, will run" if e.damage else "will run"
+    return f"{e.action} (damaged)" if e.damage else e.action
 
 
 def _plan_table(entries: list[PlanEntry]) -> Table:
@@ -97,8 +134,8 @@ def _plan_table(entries: list[PlanEntry]) -> Table:
         table.add_column(col)
     colour = {"cached": "green", "run": "yellow", "skip": "dim"}
     for e in entries:
-        action = "will run" if e.action == "run" else e.action
-        table.add_row(e.stage, e.key[:12], f"[{colour[e.action]}]{action}", e.reason)
+        colour_of = "red" if e.damage else colour[e.action]
+        table.add_row(e.stage, e.key[:12], f"[{colour_of}]{_action(e)}", escape(e.reason))
     return table
 
 
@@ -123,26 +160,49 @@ def run(
     local: Annotated[
         bool, typer.Option("--local", help="run stages in this process without Prefect")
     ] = False,
+    verify: Annotated[
+        bool, typer.Option("--verify", help="check cached outputs' checksums, recompute damage")
+    ] = False,
 ) -> None:
-    """Run the DAG (or part of it); cached stages are reused."""
+    """Run the DAG (or part of it); cached stages are reused, damaged ones recomputed."""
     t0 = time.perf_counter()
     dag = _pipeline(pipeline)
     cfg = load(dag, config, set_, dataset)
     from physanim.pipeline.progress import rich_progress
 
+    _tidy_up()
     if dag.prepare is not None:
         with rich_progress(console) as progress:
             made = dag.prepare(cfg, progress)
         if made:
             console.print(f"generated {made}")
-    store, entries = _plan(dag, cfg, only, start, force)
+    store, entries = _plan(dag, cfg, only, start, force, checksums=verify)
     for leftover in store.remove_stale_temporaries():
         console.print(f"removed abandoned partial output {leftover.name}")
+    for e in entries:
+        if e.damage and e.action == "run":
+            moved = store.quarantine(e.stage, e.key, e.damage)
+            console.print(
+                f"[red]{e.stage}/{e.key[:12]} is damaged[/red] ({escape(e.damage)}): moved to "
+                f"{escape(str(moved))}; recomputing it",
+                highlight=False,
+            )
     todo = [e for e in entries if e.action == "run"]
+    info = {
+        "configs": [str(c) for c in config or []],
+        "overrides": (dataset_overrides(dataset) if dataset else []) + list(set_ or []),
+    }
     try:
-        _execute(dag, cfg, store, entries, local=local or not todo)
+        _execute(dag, cfg, store, entries, local=local or not todo, info=info)
     except StageFailed as exc:
-        console.print(f"[red]error:[/red] {exc}", highlight=False)
+        if DEBUG:
+            raise
+        cause = exc.__cause__
+        where = str(store.root)
+        text = (
+            f"stage '{exc.stage}' failed: {_describe(cause, where)}" if _is_io(cause) else str(exc)
+        )
+        _fail(text)
         console.print("(outputs of the stages before it are kept; fix and run again)")
         raise typer.Exit(1) from None
     if dag.report is not None:
@@ -156,29 +216,51 @@ def run(
 
 
 def _execute(
-    dag: Pipeline, cfg: BaseModel, store: StageStore, entries: list[PlanEntry], local: bool
+    dag: Pipeline,
+    cfg: BaseModel,
+    store: StageStore,
+    entries: list[PlanEntry],
+    local: bool,
+    info: dict[str, object],
 ) -> None:
-    """Run the plan here (``local``) or as a Prefect flow, logging one line per stage."""
-    from physanim.pipeline import execute_plan_locally
+    """Run the plan here (``local``) or as a Prefect flow, logging one line per stage; then
+    record the run (also after a failed stage) as the latest."""
+    from physanim.pipeline import execute_plan_locally, record_run
     from physanim.pipeline.progress import rich_progress
 
     if local:
         with rich_progress(console) as progress:
-            execute_plan_locally(dag, cfg, entries, progress, on_result=_log_result)
-    else:
-        from flows.prefect_env import configure
+            execute_plan_locally(dag, cfg, entries, progress, on_result=_log_result, info=info)
+        return
+    from flows.prefect_env import configure
 
-        configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
-        from flows.pipeline_flow import pipeline_flow
+    configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
+    from flows.pipeline_flow import pipeline_flow
 
-        for e in entries:
-            if e.action == "cached":
-                store.set_latest(e.stage, e.key)
-                _log_result(StageResult(e.stage, e.key, "cached", 0.0, {}))
+    for e in entries:
+        if e.action == "cached":
+            _log_result(StageResult(e.stage, e.key, "cached", 0.0, {}))
+    try:
         with rich_progress(console) as progress:
             named = pipeline_flow.with_options(name=f"physanim-{dag.name}")
             for r in named(dag, cfg, entries, progress):
                 _log_result(r)
+    except StageFailed:
+        record_run(store, dag, {e.stage: e.key for e in entries}, info)
+        raise
+    record_run(store, dag, {e.stage: e.key for e in entries}, info)
+
+
+def _tidy_up() -> None:
+    """Stop processes and remove temporary folders that killed physanim runs left behind;
+    mark the processes this one starts as its own (so a later run can do the same for it)."""
+    from physanim.processes import mark_children, remove_stale_temp_dirs, stop_orphans
+
+    mark_children()
+    for line in stop_orphans():
+        console.print(line, highlight=False)
+    for folder in remove_stale_temp_dirs():
+        console.print(f"removed {folder}, left behind by a killed physanim", highlight=False)
 
 
 @app.command()
@@ -191,18 +273,54 @@ def status(
     start: FromOpt = None,
     force: ForceOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False,
+    verify: Annotated[
+        bool, typer.Option("--verify", help="also check the checksums of cached outputs")
+    ] = False,
 ) -> None:
-    """Dry run: for each stage, cached or will-run, and why."""
+    """Dry run: for each stage, cached, will run or damaged, and why (writes nothing)."""
     dag = _pipeline(pipeline)
     cfg = load(dag, config, set_, dataset)
-    _, entries = _plan(dag, cfg, only, start, force)
+    data = cfg.dataset.path  # type: ignore[attr-defined]
+    if not data.exists():
+        console.print(f"note: dataset directory {data} does not exist", highlight=False)
+    _, entries = _plan(dag, cfg, only, start, force, create=False, checksums=verify)
     if as_json:
         rows = [
-            {"stage": e.stage, "key": e.key, "action": e.action, "why": e.reason} for e in entries
-        ]
+            {"stage": e.stage, "key": e.key, "action": e.action, "why": e.reason,
+             "damaged": e.damage}
+            for e in entries
+        ]  # fmt: skip
         print(json.dumps(rows, indent=2))
     else:
         Console().print(_plan_table(entries))
+
+
+@app.command()
+def verify(
+    pipeline: PipelineOpt = "face",
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    dataset: DatasetOpt = None,
+) -> None:
+    """Check every output of the store against its manifest (files, sizes, checksums)."""
+    cfg = load(_pipeline(pipeline), config, set_, dataset)
+    store = _store(cfg, create=False)
+    checked = damaged = 0
+    for stage in store.stages():
+        for key in store.all_keys(stage):
+            checked += 1
+            problem = store.damage(stage, key, checksums=True)
+            if problem is not None:
+                damaged += 1
+                print(f"damaged: {stage}/{key[:12]}: {problem}")
+    line = f"{checked} output(s) checked in {store.root}, {damaged} damaged"
+    quarantined = [p for p in store.quarantined() if p.is_dir()]
+    if quarantined:
+        line += f"; {len(quarantined)} moved aside earlier to {store.root / QUARANTINE}"
+    print(line)
+    if damaged:
+        print("`physanim run --verify` moves damaged outputs aside and recomputes those it needs")
+        raise typer.Exit(1)
 
 
 @app.command()
@@ -245,24 +363,25 @@ def show(
 ) -> None:
     """Provenance of a stage's latest (or given) output, and the arrays it holds."""
     d = _pipeline(pipeline)
-    d.stage(stage)
+    _stage(d, stage)
     cfg = load(d, config, set_, dataset)
-    store = StageStore(cfg.dataset.store_path)  # type: ignore[attr-defined]
+    store = _store(cfg, create=False)
     if key is not None:
-        matches = [k for k in store.keys(stage) if k.startswith(key)]
+        matches = [k for k in store.all_keys(stage) if k.startswith(key)]
         if len(matches) != 1:
-            console.print(f"[red]error:[/red] key prefix {key!r} matches {len(matches)} outputs")
-            raise typer.Exit(2)
+            raise _fail(f"key prefix {key!r} matches {len(matches)} outputs of {stage}")
         key = matches[0]
     try:
         group = store.open(stage, key)
     except StageOutputMissing as exc:
-        console.print(f"[red]error:[/red] {exc}")
-        raise typer.Exit(1) from None
+        raise _fail(str(exc), 1) from None
     info = dict(group.attrs)
-    info["arrays"] = {
-        name: f"{a.shape} {a.dtype}" for name, a in sorted(group.arrays(), key=lambda x: x[0])
-    }
+    manifest = info.pop("manifest", {})
+    info["files"] = {"count": len(manifest), "bytes": sum(size for size, _ in manifest.values())}
+    with warnings.catch_warnings():  # plain files/ beside the arrays are not Zarr nodes
+        warnings.simplefilter("ignore")
+        arrays = sorted(group.arrays(), key=lambda x: x[0])
+    info["arrays"] = {name: f"{a.shape} {a.dtype}" for name, a in arrays}
     info["variants"] = store.keys(stage)
     print(json.dumps(info, indent=2, default=str))
 
@@ -275,22 +394,48 @@ def clean(
     dataset: DatasetOpt = None,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="list only")] = False,
 ) -> None:
-    """Remove outputs that neither this config nor any stage's latest pointer reaches."""
+    """Remove outputs that neither this config, the latest run nor any complete run (the
+    report's variants) uses, with everything they were computed from kept; also damaged and
+    quarantined outputs and abandoned partial ones."""
     d = _pipeline(pipeline)
     cfg = load(d, config, set_, dataset)
-    store, entries = _plan(d, cfg, None, None, None)
+    store, entries = _plan(d, cfg, None, None, None, create=False)
+    store.adopt_unrecorded(d.name, [s.name for s in d.stages])  # a store from before runs
+    latest = store.latest_run_name()
+    kept_runs = [r for r in store.runs() if r.name == latest or r.info.get("complete")]
     keep = {(e.stage, e.key) for e in entries}
+    keep |= {item for r in kept_runs for item in r.keys.items()}
+    verb = "would remove" if dry_run else "removing"
     doomed = store.unreachable(keep)
     for stage, key in doomed:
-        print(f"{'would remove' if dry_run else 'removing'} {stage}/{key[:12]}")
+        print(f"{verb} {stage}/{key[:12]}")
         if not dry_run:
             store.remove(stage, key)
-    stale = store.stale_temporaries()
+    damaged = [(s, k, p) for s in store.stages() for k in store.all_keys(s)
+               if (p := store.damage(s, k)) is not None]  # fmt: skip
+    for stage, key, problem in damaged:
+        print(f"{verb} damaged {stage}/{key[:12]} ({problem})")
+        if not dry_run:
+            store.remove(stage, key)
+    kept_names = {r.name for r in kept_runs}
+    runs = [r.name for r in store.runs() if r.name not in kept_names]
+    for name in runs:
+        print(f"{verb} run manifest {name} (an incomplete run, not the latest)")
+        if not dry_run:
+            store.remove_run(name)
+    stale, quarantined = store.stale_temporaries(), store.quarantined()
     for p in stale:
-        print(f"{'would remove' if dry_run else 'removing'} partial output {p.name}")
+        print(f"{verb} partial output {p.name}")
+    for p in quarantined:
+        print(f"{verb} quarantined {p.name}")
     if not dry_run:
         store.remove_stale_temporaries()
-    if not doomed and not stale:
+        for p in quarantined:
+            if p.is_dir():
+                shutil.rmtree(p)
+            else:
+                p.unlink()
+    if not (doomed or damaged or runs or stale or quarantined):
         print("nothing to clean")
 
 
@@ -355,19 +500,26 @@ def sweep(
 
     try:
         spec, variants = load_sweep(file)
-        pipeline = _pipeline(spec.pipeline)
-        cfg = load(
-            pipeline, list(map(Path, variants[0].configs)), list(variants[0].overrides), None
-        )
     except ConfigError as exc:
-        console.print(f"[red]error:[/red] {exc}", highlight=False)
-        raise typer.Exit(2) from None
+        raise _fail(str(exc)) from None
+    pipeline = _pipeline(spec.pipeline)
+    for v in variants:  # every variant is valid before anything starts
+        try:
+            files = [pipeline.default_config, *v.configs]
+            cfg, _ = load_config(pipeline.config_model(), files, v.overrides)
+        except ConfigError as exc:
+            raise _fail(f"{file}: variant {v.name!r}: {exc}") from None
+    cfg = load(pipeline, list(map(Path, variants[0].configs)), list(variants[0].overrides), None)
+    _tidy_up()
     from flows.prefect_env import configure
 
     configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
     from flows.sweep import run_sweep
 
-    outcome = run_sweep(file, dask_address=dask_address, workers=workers, serial=serial)
+    try:
+        outcome = run_sweep(file, dask_address=dask_address, workers=workers, serial=serial)
+    except (ConfigError, ValueError) as exc:  # an invalid variant, an impossible plan
+        raise _fail(str(exc)) from None
     for r in outcome.results:
         _log_result(r)
     table = Table(
@@ -397,6 +549,7 @@ def serve(
     if not datasets.is_dir():
         raise typer.BadParameter(f"{datasets} is not a directory")
     _pipeline(pipeline)
+    _tidy_up()
     from flows.prefect_env import configure, prefect_server
 
     home = configure(datasets / ".physanim")
@@ -419,6 +572,42 @@ def serve(
     raise typer.Exit(0 if rc in (0, -signal.SIGINT, 130) else rc)
 
 
+def _is_io(exc: BaseException | None) -> bool:
+    return isinstance(exc, OSError) and exc.errno is not None
+
+
+def _describe(exc: BaseException | None, where: str = "the store") -> str:
+    """One line for an error: what failed, on which file (else ``where``), and what to do."""
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+        return (
+            f"no space left writing {exc.filename or where} ({exc.strerror}); the "
+            "partial output was discarded, the store is unchanged: free space and run again"
+        )
+    if isinstance(exc, OSError) and exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        return (
+            f"cannot write {exc.filename or where} ({exc.strerror}): make the store "
+            "writable, or give another dataset directory with --dataset"
+        )
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return f"{exc.filename or 'I/O error'}: {exc.strerror}"
+    if isinstance(exc, ConfigError | StageOutputMissing | StageFailed):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc} (unexpected; --debug shows the traceback)"
+
+
 def main() -> None:
-    """Console-script entry point."""
-    sys.exit(app())
+    """Console-script entry point: errors become one line unless --debug (anywhere) or
+    PHYSANIM_DEBUG=1 asks for the traceback."""
+    global DEBUG
+    DEBUG = "--debug" in sys.argv[1:] or os.environ.get("PHYSANIM_DEBUG", "") not in ("", "0")
+    sys.argv = [sys.argv[0], *(a for a in sys.argv[1:] if a != "--debug")]
+    try:
+        sys.exit(app())
+    except KeyboardInterrupt:
+        console.print("interrupted")
+        sys.exit(130)
+    except Exception as exc:
+        if DEBUG:
+            raise
+        _fail(_describe(exc))
+        sys.exit(1)

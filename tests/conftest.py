@@ -1,10 +1,19 @@
-"""Shared fixtures: a temporary working copy of a toy dataset and its config."""
+"""Shared fixtures: a toy dataset and its config; a coarse face demo run by the CLI."""
 
 from __future__ import annotations
 
+import os
+import shutil
+import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
+from tests.commands import ROOT, physanim
+
+#: Overlay config for short, coarse face runs (relative to the repository root)
+COARSE = "tests/face_pipeline/coarse.yaml"
 
 
 @pytest.fixture
@@ -17,3 +26,21 @@ def toy_config(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     )
     monkeypatch.setenv("PHYSANIM_TOY_LOG", str(tmp_path / "executions.log"))
     return cfg
+
+
+@pytest.fixture(scope="session")
+def face_demo() -> Iterator[tuple[Path, str]]:
+    """A coarse 12-frame face demo, made and run by the README's command from the repository
+    root with relative paths: ``physanim run --dataset data/pytest-.../demo -c COARSE``.
+
+    Yields (dataset directory relative to the repository root, the run's stderr); the folder
+    is removed at the end of the session.
+    """
+    folder = Path("data") / f"pytest-{os.getpid()}-{uuid.uuid4().hex[:6]}"
+    data = folder / "demo"
+    try:
+        out = physanim("run", "--dataset", str(data), "-c", COARSE)
+        assert out.returncode == 0, out.stderr[-3000:]
+        yield data, out.stderr
+    finally:
+        shutil.rmtree(ROOT / folder, ignore_errors=True)

@@ -9,8 +9,9 @@ allowed range.
 from __future__ import annotations
 
 import copy
+import math
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -186,16 +187,40 @@ def _describe(err: Mapping[str, Any], model: type[BaseModel]) -> str:
     return f"{err['msg']} (got {got!r})"
 
 
+def _non_finite(tree: Any, prefix: str = "") -> Iterator[tuple[str, float]]:
+    """(dotted key, value) of every NaN or infinite number in a nested dict/list."""
+    if isinstance(tree, float) and not math.isfinite(tree):
+        yield prefix, tree
+    elif isinstance(tree, Mapping):
+        for k, v in tree.items():
+            yield from _non_finite(v, f"{prefix}.{k}" if prefix else str(k))
+    elif isinstance(tree, list | tuple):
+        for i, v in enumerate(tree):
+            yield from _non_finite(v, f"{prefix}[{i}]")
+
+
 def validate(model: type[M], tree: Mapping[str, Any], origins: Mapping[str, str]) -> M:
-    """Validate a merged tree; raise ConfigError listing every problem with file and dotted key."""
+    """Validate a merged tree; raise ConfigError listing every problem with file and dotted key.
+
+    NaN and infinities are refused too: parameters enter content keys, which need finite
+    numbers.
+    """
     try:
-        return model.model_validate(tree)
+        result = model.model_validate(tree)
     except ValidationError as exc:
         lines = []
         for err in exc.errors():
             dotted = ".".join(str(p) for p in err["loc"])
             lines.append(f"{_origin(dotted, origins)}: {dotted}: {_describe(err, model)}")
         raise ConfigError("invalid config:\n  " + "\n  ".join(lines)) from None
+    bad = [
+        f"{_origin(dotted.split('[')[0], origins)}: {dotted}: must be a finite number "
+        f"(got {value!r})"
+        for dotted, value in _non_finite(result.model_dump())
+    ]
+    if bad:
+        raise ConfigError("invalid config:\n  " + "\n  ".join(bad))
+    return result
 
 
 def load_config(

@@ -7,6 +7,7 @@ from physanim.pipeline.runner import (
     StageResult,
     execute_plan_locally,
     execute_stage,
+    record_run,
 )
 from physanim.pipeline.spec import DatasetParams, Pipeline, StageSpec
 
@@ -23,4 +24,5 @@ __all__ = [
     "execute_plan_locally",
     "execute_stage",
     "make_plan",
+    "record_run",
 ]

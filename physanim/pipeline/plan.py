@@ -16,7 +16,11 @@ Action = Literal["cached", "run", "skip"]
 
 @dataclass(frozen=True)
 class PlanEntry:
-    """What ``run`` will do for one stage: ``cached`` (reuse), ``run`` or ``skip`` (unselected)."""
+    """What ``run`` will do for one stage: ``cached`` (reuse), ``run`` or ``skip`` (unselected).
+
+    ``damage``: what is wrong with a damaged output found at this key (it is moved aside and
+    recomputed), else empty.
+    """
 
     stage: str
     key: str
@@ -25,6 +29,7 @@ class PlanEntry:
     upstream: Mapping[str, str]
     params: Mapping[str, Any]
     forced: bool = False
+    damage: str = ""
 
 
 def key_params(spec: StageSpec, dataset: DatasetParams, params: BaseModel) -> dict[str, Any]:
@@ -74,13 +79,15 @@ def make_plan(
     only: str | None = None,
     start: str | None = None,
     force: Iterable[str] = (),
+    checksums: bool = False,
 ) -> list[PlanEntry]:
     """Plan a run of ``pipeline`` with ``config``.
 
     ``only``: run just that stage (its upstream must be cached).  ``start`` (CLI ``--from``):
     run that stage and its downstream, reusing cached upstream.  ``force``: recompute these
     stages and their downstream even when cached.  Stages outside the selection are ``skip``
-    when not cached.
+    when not cached.  A damaged output is not cached; ``checksums`` also verifies the
+    checksums of every cached output (``status --verify``), not only its files' sizes.
     """
     if only and start:
         raise ValueError("use --only or --from, not both")
@@ -100,8 +107,12 @@ def make_plan(
     for spec in pipeline.stages:
         params = key_params(spec, dataset, getattr(config, spec.name))
         upstream = {u: keys[u] for u in spec.upstream}
-        key = keys[spec.name] = stage_key(spec.name, spec.version, params, upstream)
-        cached = store.has(spec.name, key)
+        try:
+            key = keys[spec.name] = stage_key(spec.name, spec.version, params, upstream)
+        except ValueError as exc:
+            raise ValueError(f"{spec.name}.{str(exc).removeprefix('params.')}") from None
+        damage = store.damage(spec.name, key, checksums=checksums) or ""
+        cached = not damage and store.has(spec.name, key)
         if spec.name not in selected:
             action: Action = "cached" if cached else "skip"
             reason = "not selected" + ("" if cached else " (and not computed)")
@@ -111,17 +122,26 @@ def make_plan(
             action, reason = "cached", "same params, code version and inputs"
         else:
             action, reason = "run", _why(spec, store, params, upstream)
+        if damage:
+            reason = f"damaged: {damage}" if action == "run" else f"{reason}; damaged: {damage}"
         entries.append(
-            PlanEntry(spec.name, key, action, reason, upstream, params, spec.name in forced)
+            PlanEntry(spec.name, key, action, reason, upstream, params, spec.name in forced, damage)
         )
 
     by_name = {e.stage: e for e in entries}
     for e in entries:
         if e.action == "run":
-            blocked = [u for u in e.upstream if by_name[u].action == "skip"]
+            blocked = [by_name[u] for u in e.upstream if by_name[u].action == "skip"]
             if blocked:
+                what = "; ".join(
+                    f"{b.stage} is damaged ({b.damage})"
+                    if b.damage
+                    else f"{b.stage} has no output for this config"
+                    for b in blocked
+                )
                 raise ValueError(
-                    f"stage {e.stage} needs {', '.join(blocked)}, which has no output for this "
-                    "config; run without --only/--from first"
+                    f"stage {e.stage} needs {', '.join(b.stage for b in blocked)}: {what}; "
+                    "run without --only (or with --from "
+                    f"{blocked[0].stage}) to compute it first"
                 )
     return entries

@@ -1,4 +1,4 @@
-"""Execute planned stages: compute into a temporary group, commit atomically, point latest."""
+"""Execute planned stages: compute into a temporary group, commit atomically, record the run."""
 
 from __future__ import annotations
 
@@ -52,7 +52,8 @@ def execute_stage(
 ) -> StageResult:
     """Run one planned stage and commit its output (``config`` may be a plain dict: workers).
 
-    If the output appeared meanwhile (another worker), nothing is recomputed.
+    If the output appeared meanwhile (another worker), nothing is recomputed.  A forced stage
+    replaces its existing output only once the new one is complete.
     """
     if not isinstance(config, BaseModel):
         config = pipeline.config_model().model_validate(config)
@@ -60,11 +61,8 @@ def execute_stage(
     dataset = config.dataset  # type: ignore[attr-defined]
     store = StageStore(dataset.store_path)
     t0, started = time.perf_counter(), time.time()
-    if store.has(spec.name, entry.key):
-        if not entry.forced:
-            store.set_latest(spec.name, entry.key)
-            return StageResult(spec.name, entry.key, "cached", 0.0, {})
-        store.remove(spec.name, entry.key)
+    if not entry.forced and store.has(spec.name, entry.key):
+        return StageResult(spec.name, entry.key, "cached", 0.0, {})
     params = getattr(config, spec.name)
     provenance = {
         "version": spec.version,
@@ -73,7 +71,7 @@ def execute_stage(
         "upstream": dict(entry.upstream),
         "pipeline": pipeline.name,
     }
-    with store.writing(spec.name, entry.key, provenance) as group:
+    with store.writing(spec.name, entry.key, provenance, replace=entry.forced) as group:
         ctx = StageContext(
             spec=spec,
             params=params,
@@ -90,11 +88,35 @@ def execute_stage(
             raise StageFailed(spec.name, exc) from exc
         if ctx.summary:
             group.attrs["summary"] = ctx.summary
-    store.set_latest(spec.name, entry.key)
     seconds = time.perf_counter() - t0
     return StageResult(
         spec.name, entry.key, "ran", seconds, ctx.summary, started, f"{_HOST}:{os.getpid()}"
     )
+
+
+def record_run(
+    store: StageStore,
+    pipeline: Pipeline,
+    planned: Mapping[str, str],
+    info: Mapping[str, Any] | None = None,
+    *,
+    latest: bool = True,
+) -> str | None:
+    """Write the run manifest of a run: the planned keys (stage -> key) whose output exists.
+
+    ``complete`` in the manifest says whether every stage of the pipeline has its output;
+    ``latest`` makes it the store's LATEST run.  Returns the manifest's name (None: no output
+    exists, nothing is recorded).  Outputs of a store from before run manifests are first
+    recorded as runs of their own.
+    """
+    keys = {stage: key for stage, key in planned.items() if store.has(stage, key)}
+    if not keys:
+        return None
+    stages = [s.name for s in pipeline.stages]
+    store.adopt_unrecorded(pipeline.name, stages)
+    complete = all(s in keys for s in stages)
+    facts = {"pipeline": pipeline.name, "complete": complete, **(info or {})}
+    return store.record_run(keys, facts, latest=latest)
 
 
 def execute_plan_locally(
@@ -103,20 +125,27 @@ def execute_plan_locally(
     entries: list[PlanEntry],
     progress: ProgressFactory | None = None,
     on_result: Callable[[StageResult], None] | None = None,
+    info: Mapping[str, Any] | None = None,
 ) -> list[StageResult]:
-    """Run a plan in this process, in order, without Prefect (tests, debugging, ``--local``)."""
+    """Run a plan in this process, in order, without Prefect (tests, debugging, ``--local``),
+    then record it as the latest run (also when a stage failed: what completed is kept);
+    ``info`` goes into the run manifest."""
     store = StageStore(config.dataset.store_path)  # type: ignore[attr-defined]
     store.remove_stale_temporaries()
     results = []
-    for e in entries:
-        if e.action == "skip":
-            continue
-        if e.action == "cached":
-            store.set_latest(e.stage, e.key)
-            r = StageResult(e.stage, e.key, "cached", 0.0, {})
-        else:
-            r = execute_stage(pipeline, config, e, progress)
-        results.append(r)
-        if on_result:
-            on_result(r)
+    try:
+        for e in entries:
+            if e.action == "skip":
+                continue
+            if e.action == "cached":
+                r = StageResult(e.stage, e.key, "cached", 0.0, {})
+            else:
+                r = execute_stage(pipeline, config, e, progress)
+            results.append(r)
+            if on_result:
+                on_result(r)
+    except StageFailed:
+        record_run(store, pipeline, {e.stage: e.key for e in entries}, info)
+        raise
+    record_run(store, pipeline, {e.stage: e.key for e in entries}, info)
     return results

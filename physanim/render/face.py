@@ -462,7 +462,7 @@ def _render_isolated(vertices, faces, per_frame, cameras, settings, progress) ->
     memory-mapped .npy); raises RuntimeError if the worker fails or dies."""
     n_frames = len(vertices)
     width, height = settings["size"]
-    with tempfile.TemporaryDirectory(prefix="physanim-render-") as tmp:
+    with tempfile.TemporaryDirectory(prefix=f"physanim-render-{os.getpid()}-") as tmp:
         job, result = Path(tmp) / "job.npz", Path(tmp) / "frames.npy"
         cmap = settings["colour_map"]
         np.savez(

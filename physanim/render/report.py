@@ -66,11 +66,12 @@ def _fmt(value: Any) -> str:
 
 
 def _rel(path: str | Path, out_dir: Path, what: str) -> str:
-    path = Path(path)
-    full = path if path.is_absolute() else out_dir / path
+    """Link to ``path`` from ``out_dir``; a relative path is relative to the working
+    directory, like every other path (never to ``out_dir``)."""
+    full = Path(path).resolve()
     if not full.is_file():
-        raise ReportError(f"report: {what} {full} does not exist; write it before build_report")
-    return Path(os.path.relpath(full.resolve(), out_dir.resolve())).as_posix()
+        raise ReportError(f"report: {what} {path} does not exist; write it before build_report")
+    return Path(os.path.relpath(full, out_dir.resolve())).as_posix()
 
 
 def _pre(data: Any) -> str:
@@ -163,8 +164,8 @@ def build_report(
 ) -> Path:
     """Write ``out_dir/index.html`` and return its path.
 
-    ``video``/``images`` (caption, path): files that must exist (absolute or relative to
-    ``out_dir``; linked relatively).  ``key_figures``: name -> value (numbers to 4
+    ``video``/``images`` (caption, path): files that must exist (absolute or relative to the
+    working directory; linked relatively).  ``key_figures``: name -> value (numbers to 4
     significant digits; put the unit in the name).  ``stage_table``: one dict per stage
     with ``stage`` and optionally ``key``, ``action`` ("ran"/"cached"), ``seconds``,
     ``params`` (dict) and any further entries (e.g. ``provenance``) shown as JSON in a
@@ -213,5 +214,7 @@ def build_report(
         parts.append(f"<h2>Stages</h2><section class='card'>{_stages(stage_table)}</section>")
     parts.append("</main></body></html>")
     path = out_dir / "index.html"
-    path.write_text("\n".join(parts), encoding="utf-8")
+    partial = out_dir / f".index.html.{os.getpid()}"  # renamed into place: never half-written
+    partial.write_text("\n".join(parts), encoding="utf-8")
+    partial.replace(path)
     return path

@@ -1,6 +1,6 @@
 """The HTML report of a face-pipeline run, assembled from the stage store.
 
-Not a stage: it is a view over everything the store holds, so it can compare every variant
+Not a stage: it is a view over the runs the store recorded, so it can compare every variant
 of ``simulate``/``evaluate`` computed so far (material models, sweeps) side by side.
 """
 
@@ -23,6 +23,22 @@ def variant_label(store: StageStore, evaluate_key: str) -> str:
     sim = store.provenance("simulate", sim_key)
     model = store.provenance("materials", sim["upstream"]["materials"])["params"]["model"]
     return f"{model['name']} ({sim_key[:6]})"
+
+
+def shown_variants(store: StageStore) -> list[str]:
+    """Evaluate keys of the complete runs recorded in the store (run manifests, sweep variants
+    included), oldest first, whose materials, simulate and evaluate outputs are intact."""
+    shown: list[str] = []
+    for run in sorted(store.runs(), key=lambda r: r.name):
+        key = run.keys.get("evaluate")
+        chain = ("materials", "simulate", "evaluate")
+        if (
+            run.info.get("complete")
+            and key not in shown
+            and all(s in run.keys and store.has(s, run.keys[s]) for s in chain)
+        ):
+            shown.append(key)  # type: ignore[arg-type]
+    return shown
 
 
 def write_run_report(
@@ -59,7 +75,7 @@ def write_run_report(
     variants: dict[str, dict[str, Any]] = {}
     cost, mouth = {}, {}
     time = None
-    for k in store.keys("evaluate"):
+    for k in shown_variants(store):
         label = variant_label(store, k)
         ev = store.open("evaluate", k)
         summary = dict(ev.attrs.get("summary", {}))

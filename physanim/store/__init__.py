@@ -2,6 +2,8 @@
 
 from physanim.store.keys import canonical_json, files_fingerprint, stage_key
 from physanim.store.stage_store import (
+    RunRecord,
+    StageOutputDamaged,
     StageOutputMissing,
     StageStore,
     frame_chunks,
@@ -11,6 +13,8 @@ from physanim.store.stage_store import (
 )
 
 __all__ = [
+    "RunRecord",
+    "StageOutputDamaged",
     "StageOutputMissing",
     "StageStore",
     "canonical_json",

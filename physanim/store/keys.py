@@ -14,20 +14,21 @@ def canonical_json(value: Any) -> str:
     """Serialise ``value`` to JSON with sorted keys and no whitespace, so equal values hash equally.
 
     Floats are written by ``repr`` (shortest round-trip form), so ``0.1`` and ``1e-1`` agree;
-    NaN and infinities are refused because they have no canonical JSON form.
+    NaN and infinities are refused because they have no canonical JSON form (the ValueError
+    starts with the dotted path of the value, e.g. ``params.dt: ...``).
     """
 
-    def check(v: Any) -> None:
+    def check(v: Any, path: str) -> None:
         if isinstance(v, float) and not math.isfinite(v):
-            raise ValueError(f"cannot hash non-finite float {v!r} in stage params")
+            raise ValueError(f"{path}: {v!r} is not a finite number; use a finite value")
         if isinstance(v, Mapping):
-            for item in v.values():
-                check(item)
+            for k, item in v.items():
+                check(item, f"{path}.{k}" if path else str(k))
         elif isinstance(v, list | tuple):
-            for item in v:
-                check(item)
+            for i, item in enumerate(v):
+                check(item, f"{path}[{i}]")
 
-    check(value)
+    check(value, "")
     return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
 
 
@@ -39,6 +40,7 @@ def stage_key(
     ``params`` is the validated, JSON-able parameter dict (plus any input fingerprint);
     ``upstream`` maps each upstream stage name to its output key.
     """
+    canonical_json(dict(params))  # errors name the parameter, e.g. "params.dt: ..."
     payload = canonical_json(
         {"stage": stage, "version": version, "params": dict(params), "upstream": dict(upstream)}
     )

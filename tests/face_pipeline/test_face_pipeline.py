@@ -1,12 +1,16 @@
 """The whole face DAG on a short demo, at coarse resolution: outputs, caching, physics.
 
-One module-scoped sweep of the shipped material models and the default run on its store
-(12 frames, coarse scan and tets) feed every test here.
+Everything here runs the README's commands from the repository root with relative paths, as
+a user types them: ``physanim run`` on a fresh coarse demo (session fixture ``face_demo``),
+again with ``-c configs/models/model2.yaml`` (the material-model gesture, which must update
+the report with both variants side by side), and ``physanim sweep`` of the shipped models.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import re
 from pathlib import Path
 
 import cv2
@@ -15,70 +19,67 @@ import pytest
 
 from flows.dags import FACE
 from physanim.config import load_config
-from physanim.pipeline import execute_plan_locally, make_plan
+from physanim.pipeline import make_plan
 from physanim.store import StageStore
+from tests.commands import ROOT, physanim
+from tests.conftest import COARSE
 
-CONFIGS = Path(__file__).resolve().parents[2] / "configs"
-COARSE = [
-    "demo.n_frames=12",
-    "align.remesh_edge_length_m=0.0015",
-    "tetra.surface_edge_length_m=0.005",
-    "tetra.edge_length_m=0.007",
-    "tetra.max_opt_iterations=5",
-    "simulate.dt=0.002",
-    "evaluate.error_every_frames=3",
-    "evaluate.error_max_points=800",
-    "render.tile_width_px=120",
-    "render.tile_height_px=160",
-    "render.every_frames=2",
-]
+RAN = re.compile(r"^(\w+): ran in", re.M)
 
 
-def configure(data: Path, *files: Path, extra: tuple[str, ...] = ()):
-    sets = [f"dataset.dir={data}", *COARSE, *extra]
-    cfg, _ = load_config(FACE.config_model(), [FACE.default_config, *files], sets)
+def configure(data: Path, *files: str | Path, extra: tuple[str, ...] = ()):
+    """Config and store of a coarse run on ``data`` (relative to the repository root)."""
+    sets = [f"dataset.dir={ROOT / data}", *extra]
+    files = [FACE.default_config, ROOT / COARSE, *(ROOT / f for f in files)]
+    cfg, _ = load_config(FACE.config_model(), files, sets)
     return cfg, StageStore(cfg.dataset.store_path)
 
 
-def run(cfg, store) -> list[str]:
-    plan = make_plan(FACE, cfg, store)
-    results = execute_plan_locally(FACE, cfg, plan)
-    return [r.stage for r in results if r.action == "ran"]
+@pytest.fixture(scope="module")
+def demo_run(face_demo):
+    """The default (uniform material) run of the session's coarse demo."""
+    data, out = face_demo
+    cfg, store = configure(data)
+    return data, cfg, store, RAN.findall(out)
 
 
 @pytest.fixture(scope="module")
-def model_sweep(tmp_path_factory: pytest.TempPathFactory):
-    """The shipped models sweep (configs/sweeps/models.yaml) on a fresh coarse demo, serially."""
-    from flows.sweep import run_sweep
-    from tasks.ingest import ensure_demo
+def model2_run(demo_run):
+    """``physanim run -c configs/models/model2.yaml --set simulate.dt=0.002`` after the
+    default run: the README's edit-and-rerun gesture (materials onward run again)."""
+    data = demo_run[0]
+    cmd = ["run", "--dataset", str(data), "-c", COARSE, "-c", "configs/models/model2.yaml"]
+    out = physanim(*cmd, "--set", "simulate.dt=0.002")
+    assert out.returncode == 0, out.stderr[-3000:]
+    return data, out.stderr
 
-    tmp = tmp_path_factory.mktemp("face")
-    data = tmp / "demo"
-    ensure_demo(configure(data)[0])
-    sets = "".join(f"\n  {k}: {v}" for k, v in (s.split("=", 1) for s in COARSE))
-    sweep = tmp / "models.yaml"
-    sweep.write_text(
-        (CONFIGS / "sweeps" / "models.yaml")
+
+@pytest.fixture(scope="module")
+def model_sweep(model2_run):
+    """The shipped models sweep (configs/sweeps/models.yaml) on the coarse demo, run by
+    ``physanim sweep FILE --serial`` with a sweep file under data/ (relative paths)."""
+    data = model2_run[0]
+    sweep = data.parent / "models.yaml"
+    (ROOT / sweep).write_text(
+        (ROOT / "configs" / "sweeps" / "models.yaml")
         .read_text()
         .replace("datasets: [demo]", f"datasets: [{data}]")
-        .replace("configs/models/", f"{CONFIGS}/models/")
-        .replace("variants:", f"set:{sets}\n  render.every_frames: 6\nvariants:")
+        .replace(
+            "variants:",
+            f"configs: [{COARSE}]\nset: {{simulate.dt: 0.002, render.every_frames: 6}}\nvariants:",
+        )
     )
-    return data, run_sweep(sweep, serial=True)
-
-
-@pytest.fixture(scope="module")
-def demo_run(model_sweep):
-    """The default (uniform material) run on the sweep's store: its shared stages are cached."""
-    data, _ = model_sweep
-    cfg, store = configure(data)
-    ran = run(cfg, store)
-    return data, cfg, store, ran
+    out = physanim("sweep", str(sweep), "--serial")
+    assert out.returncode == 0, out.stderr[-3000:]
+    folder = ROOT / data / "runs" / "sweeps" / "models"
+    summary = json.loads((folder / "summary.json").read_text())
+    keys = {v["variant"]: v["keys"] for v in summary["variants"]}
+    return data, keys, RAN.findall(out.stderr), folder / "index.html"
 
 
 def test_every_stage_runs_and_writes_its_outputs(demo_run) -> None:
     _, cfg, store, ran = demo_run
-    assert ran == ["materials", "simulate", "evaluate", "render"]  # upstream: the sweep's
+    assert ran == [s.name for s in FACE.stages]
     assert all(store.has(s.name, store.latest(s.name)) for s in FACE.stages)
     sim = store.open("simulate")
     n_frames = 12
@@ -117,10 +118,19 @@ def test_driven_nodes_follow_the_landmarks_and_the_skin_lags_between(demo_run) -
     assert 0 < peak_free <= 1.5 * peak_driven
 
 
-def test_material_edit_reruns_materials_onward_only(demo_run) -> None:
-    data, _, _, _ = demo_run
-    edit = ("materials.model.regions.cphs_R.E_kPa=250.0",)  # a model the sweep did not run
-    cfg, store = configure(data, CONFIGS / "models" / "model2.yaml", extra=edit)
+def test_material_edit_reruns_materials_onward_only(model2_run) -> None:
+    """The model overlay re-ran materials onward only, and the report (written from relative
+    paths) shows both variants side by side with links that resolve."""
+    data, out = model2_run
+    assert RAN.findall(out) == ["materials", "simulate", "evaluate", "render"]
+    report = ROOT / data / "runs" / "report" / "index.html"
+    text = report.read_text()
+    assert re.search(r"<th>measure</th><th>uniform \(\w+\)</th><th>model2 \(\w+\)</th>", text)
+    assert "variants_symmetry.png" in text
+    for link in re.findall(r"(?:src|href)='([^']+)'", text):
+        assert (report.parent / link).is_file(), link
+    edit = ("materials.model.regions.cphs_R.E_kPa=250.0",)  # a model no run used
+    cfg, store = configure(data, "configs/models/model2.yaml", extra=edit)
     plan = make_plan(FACE, cfg, store)
     assert [e.stage for e in plan if e.action == "run"] == [
         "materials", "simulate", "evaluate", "render",
@@ -134,11 +144,11 @@ def test_regional_models_change_symmetry_as_physics_predicts(model_sweep) -> Non
     right-side stretch E_R (eq 4.39, landmarks ex, pi, al, cphi around ch) must move
     monotonically with the cphs_R stiffness: models 2 and 3 fall on opposite sides of model 1.
     """
-    data, outcome = model_sweep
-    store = StageStore(data / "runs" / "store.zarr")
+    data, variants, _, _ = model_sweep
+    store = StageStore(ROOT / data / "runs" / "store.zarr")
     peak, stretch = {}, {}
     for model in ("model1", "model2", "model3"):
-        keys = outcome.variants[model]
+        keys = variants[model]
         mats = store.open("materials", keys["materials"])
         sim = store.open("simulate", keys["simulate"])
         names = list(mats.attrs["region_names"])
@@ -158,30 +168,36 @@ def test_regional_models_change_symmetry_as_physics_predicts(model_sweep) -> Non
     assert (stretch["model2"] - stretch["model1"]) * (stretch["model3"] - stretch["model1"]) < 0
 
 
-def test_model_sweep_computes_shared_stages_once(model_sweep) -> None:
-    """configs/sweeps/models.yaml: ingest..tetra run once, materials onward once per model;
-    the report shows the three models side by side, each with its own video."""
-    data, outcome = model_sweep
-    ran = [r.stage for r in outcome.results if r.action == "ran"]
+def test_model_sweep_computes_shared_stages_once(model_sweep, demo_run) -> None:
+    """configs/sweeps/models.yaml: ingest..tetra and model2's materials..evaluate are the
+    earlier runs' (cached), the rest runs once per model; the report shows the three models
+    side by side, each with its own video."""
+    data, keys, ran, report_path = model_sweep
     counts = {s.name: ran.count(s.name) for s in FACE.stages}
     assert counts == {
-        "ingest": 1, "track": 1, "fit": 1, "align": 1, "tetra": 1,
-        "materials": 3, "simulate": 3, "evaluate": 3, "render": 3,
+        "ingest": 0, "track": 0, "fit": 0, "align": 0, "tetra": 0,
+        "materials": 2, "simulate": 2, "evaluate": 2, "render": 3,
     }  # fmt: skip
-    store = StageStore(data / "runs" / "store.zarr")
-    keys = outcome.variants
+    store = StageStore(ROOT / data / "runs" / "store.zarr")
     assert list(keys) == ["model1", "model2", "model3"]
+    default = {e.stage: e.key for e in make_plan(FACE, demo_run[1], store)}
+    assert all(k[s] == default[s] for k in keys.values() for s in FACE.upstream("tetra"))
     for stage in FACE.upstream("tetra"):
         assert len({k[stage] for k in keys.values()}) == 1
     for stage in ("materials", "simulate", "evaluate", "render"):
         assert len({k[stage] for k in keys.values()}) == 3
         assert all(store.has(stage, k[stage]) for k in keys.values())
-    report = outcome.report_path.read_text()
+    report = report_path.read_text()
     assert "<th>measure</th><th>model1</th><th>model2</th><th>model3</th>" in report
     for k in keys.values():
         video = store.files("render", k["render"]) / "panel.mp4"
         assert int(cv2.VideoCapture(str(video)).get(cv2.CAP_PROP_FRAME_COUNT)) == 2  # 12 / 6
-        assert os.path.relpath(video, outcome.report_path.parent.resolve()) in report
+        assert os.path.relpath(video, report_path.parent.resolve()) in report
+    # the sweep records its variants as runs but leaves the latest run (model2's) as it was
+    cfg, _ = configure(data, "configs/models/model2.yaml", extra=("simulate.dt=0.002",))
+    model2 = {e.stage: e.key for e in make_plan(FACE, cfg, store)}
+    assert {s: store.latest(s) for s in model2} == model2
+    assert {"model1", "model2", "model3"} <= {r.info.get("variant") for r in store.runs()}
 
 
 def test_dag_upstream_and_downstream_closures() -> None:

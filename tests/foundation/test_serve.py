@@ -32,10 +32,10 @@ def test_serve_processes_new_dataset_and_stops_on_signal(tmp_path: Path) -> None
         cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
     )
     try:
-        first = datasets / "first" / "runs" / "store.zarr" / "total" / "LATEST"
+        first = datasets / "first" / "runs" / "store.zarr" / "LATEST"
         assert wait_for(first, 240), "the first scheduled run never completed"
         (datasets / "second").mkdir()  # a new dataset dropped in while serving
-        second = datasets / "second" / "runs" / "store.zarr" / "total" / "LATEST"
+        second = datasets / "second" / "runs" / "store.zarr" / "LATEST"
         assert wait_for(second, 120), "the new dataset was not processed"
     finally:
         proc.send_signal(signal.SIGTERM)

@@ -56,3 +56,13 @@ def test_report_links_and_content(tmp_path):
 def test_report_missing_file(tmp_path):
     with pytest.raises(ReportError, match="does not exist"):
         build_report(tmp_path, title="t", images=[("x", tmp_path / "nope.png")])
+
+
+def test_relative_paths_are_relative_to_the_working_directory(tmp_path, monkeypatch):
+    """The README's commands pass relative paths: ``out/x.png`` with ``out_dir=out`` is the
+    file ``out/x.png``, linked as ``x.png`` (never ``out/out/x.png``)."""
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "runs" / "report"
+    png, _ = plot_symmetry_cost(np.arange(5.0), {"m1": np.zeros(5)}, out / "sym")
+    path = build_report("runs/report", title="t", images=[("cost", "runs/report/sym.png")])
+    assert png == out / "sym.png" and "src='sym.png'" in path.read_text()
