@@ -145,5 +145,5 @@ def mandible_weights(points: NDArray, mouth: MouthLine, blend_m: float) -> NDArr
 
 def jaw_displacements(points: NDArray, weights: NDArray, jaw: JawMotion) -> NDArray:
     """Displacements (T, N, 3) m of points (N, 3) m that follow the jaw with ``weights`` (N,)."""
-    moved = _rotate(points, jaw.pivot, jaw.axis, jaw.angle)
-    return weights[None, :, None] * (moved - points[None])
+    turn = jaw.rotations() - np.eye(3)  # (R - I) (x - p): exactly 0 where the angle is 0
+    return weights[None, :, None] * np.einsum("tij,kj->tki", turn, points - jaw.pivot)
