@@ -59,9 +59,12 @@ def test_landmark_patches_share_the_stiffness_and_stay_on_their_lip() -> None:
     np.testing.assert_allclose(drive.targets[1, lower], 2e-3)
     upper_only = near[:, 1] > 0.0
     assert np.all(drive.targets[1, upper_only] <= 1e-3 + 1e-15)
-    coarse = landmark_drive(np.arange(len(pts) // 100), pts[::100] * 10, side[::100] * 0,
-                            landmarks[:1], np.array([0]), motion[:, :1], np.array([100.0]),
-                            np.array([0.005]))  # fmt: skip
+    grid = np.stack(np.meshgrid(np.arange(-2, 3), np.arange(-2, 3)), -1).reshape(-1, 2) * 0.01
+    sparse = np.c_[grid, np.zeros(len(grid))]  # 10 mm apart: no node within 5 mm but one
+    coarse = landmark_drive(
+        np.arange(len(sparse)), sparse, np.zeros(len(sparse)), landmarks[:1], np.array([0]),
+        motion[:, :1], np.array([100.0]), np.array([0.005]),
+    )  # fmt: skip
     assert len(coarse.nodes) >= MIN_PATCH_NODES
     assert patch_weights(np.array([0.0, 0.005, 0.006]), 0.005).tolist() == [1.0, 0.0, 0.0]
 
