@@ -66,7 +66,7 @@ class SpringDrive:
 
 
 #: A landmark's patch always reaches at least this many nodes (see :func:`landmark_drive`).
-MIN_PATCH_NODES = 4
+MIN_PATCH_NODES = 3
 
 
 def patch_weights(distance: NDArray, radius: NDArray) -> NDArray:

@@ -117,7 +117,7 @@ def test_skull_holds_the_mandible_turns_and_landmarks_pull_patches(demo_run) -> 
     skin = np.nonzero(mesh["skin"][...])[0]
     springs = sim["spring_nodes"][...]
     # (the default mesh: 22 % of the skin, see the README; this coarse one has 4-7 times fewer
-    # skin nodes and every patch still reaches 4 of them)
+    # skin nodes and every patch still reaches 3 of them)
     assert np.isin(springs, skin).all() and 0 < len(springs) <= 0.75 * len(skin)
     free = np.setdiff1d(skin, springs)
     moving = np.linalg.norm(disp[:, free], axis=-1).max(axis=0) > 1e-4

@@ -42,7 +42,7 @@ def test_springs_in_series_with_a_uniaxial_block() -> None:
 def test_landmark_patches_share_the_stiffness_and_stay_on_their_lip() -> None:
     """Two landmarks on a 1 mm grid of skin nodes, the second on the lower lip (y < 0 is the
     lower side): each patch's springs sum to its stiffness, reach 5 mm, never cross the lip
-    seam; on a 10 mm grid a patch still pulls 4 nodes, never a single one."""
+    seam; on a 10 mm grid a patch still pulls 3 nodes, never a single one."""
     g = np.stack(np.meshgrid(np.arange(-10, 11), np.arange(-10, 11)), -1).reshape(-1, 2) * 1e-3
     pts = np.c_[g, np.zeros(len(g))]
     side = np.where(pts[:, 1] < 0, -1, 0)
