@@ -496,36 +496,29 @@ def sweep(
     serial: Annotated[bool, typer.Option(help="no Dask: one job after another here")] = False,
 ) -> None:
     """Run a parameter sweep; stages shared between variants are computed once."""
-    from physanim.pipeline.sweep import load_sweep
+    from flows.dags import get_pipeline
+    from physanim.pipeline.sweep import plan_sweep
 
-    try:
-        spec, variants = load_sweep(file)
-    except ConfigError as exc:
+    try:  # every variant is valid and planned before anything starts
+        plan = plan_sweep(file, get_pipeline)
+    except (ConfigError, ValueError) as exc:  # an invalid variant, an unknown pipeline
         raise _fail(str(exc)) from None
-    pipeline = _pipeline(spec.pipeline)
-    for v in variants:  # every variant is valid before anything starts
-        try:
-            files = [pipeline.default_config, *v.configs]
-            cfg, _ = load_config(pipeline.config_model(), files, v.overrides)
-        except ConfigError as exc:
-            raise _fail(f"{file}: variant {v.name!r}: {exc}") from None
-    cfg = load(pipeline, list(map(Path, variants[0].configs)), list(variants[0].overrides), None)
     _tidy_up()
     from flows.prefect_env import configure
 
-    configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
+    configure(plan.run_dir)
     from flows.sweep import run_sweep
 
     try:
-        outcome = run_sweep(file, dask_address=dask_address, workers=workers, serial=serial)
-    except (ConfigError, ValueError) as exc:  # an invalid variant, an impossible plan
+        outcome = run_sweep(plan, dask_address=dask_address, workers=workers, serial=serial)
+    except ValueError as exc:  # a scheduler that does not answer, workers it cannot serve
         raise _fail(str(exc)) from None
     for r in outcome.results:
         _log_result(r)
     table = Table(
         title=f"sweep {file.name}: {len(outcome.results)} stage run(s), {outcome.seconds:.1f} s"
     )
-    stages = [s.name for s in pipeline.stages]
+    stages = [s.name for s in plan.pipeline.stages]
     for col in ("variant", *stages):
         table.add_column(col)
     for name, keys in outcome.variants.items():
@@ -533,6 +526,10 @@ def sweep(
     Console().print(table)
     console.print(f"summary: {outcome.summary_path}")
     console.print(f"report: {outcome.report_path}")
+    if outcome.errors:
+        for name, error in outcome.errors.items():
+            console.print(f"[red]error:[/red] variant {escape(name)!r}: {escape(error)}")
+        raise typer.Exit(1)
 
 
 @app.command()

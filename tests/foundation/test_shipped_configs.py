@@ -9,13 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from flows.dags import ARM, FACE, KEYFRAME
-from flows.sweep import plan_sweep
+from flows.dags import ARM, FACE, KEYFRAME, get_pipeline
 from physanim.config import ConfigError, load_config
 from physanim.dynamics import Figure
 from physanim.dynamics.keyframes import KeyframeSpec, world_constraints
 from physanim.pipeline import Pipeline
-from physanim.pipeline.sweep import load_sweep
+from physanim.pipeline.sweep import load_sweep, plan_sweep
 from tasks.keyframes import project_path
 from tests.commands import ROOT
 
@@ -99,9 +98,10 @@ def test_sweep_files_plan_every_variant(path: Path, tmp_path: Path, monkeypatch)
     monkeypatch.chdir(ROOT)
     sweep = tmp_path / path.name
     sweep.write_text(path.read_text() + f"\nset: {{dataset.store: {tmp_path / 'store.zarr'}}}\n")
-    _, variants, configs, keys, jobs = plan_sweep(sweep)
-    assert len(variants) >= 2 and len({tuple(k.items()) for k in keys.values()}) == len(variants)
-    assert {j.entry.stage for j in jobs} >= {"materials", "simulate"}
+    plan = plan_sweep(sweep, get_pipeline)
+    keys = [tuple(k.items()) for k in plan.keys.values()]
+    assert len(plan.variants) >= 2 and len(set(keys)) == len(plan.variants)
+    assert {j.entry.stage for j in plan.jobs} >= {"materials", "simulate"}
 
 
 def test_a_nested_value_merges_into_the_default_section() -> None:
