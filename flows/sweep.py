@@ -118,13 +118,16 @@ NO_MALLOC_TRIM = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": 
 THREAD_ENV = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
-def worker_thread_env(workers: int, cores: int | None = None) -> dict[str, str]:
-    """Environment for local Dask workers: the machine's cores shared out between them.
+def worker_thread_env(
+    workers: int, cores: int | None = None, per_worker: int | None = None
+) -> dict[str, str]:
+    """Environment for local Dask workers: the machine's cores shared out between them
+    (or ``per_worker`` threads each).
 
     Each worker would otherwise size its numba (FEM solve), OpenMP and BLAS pools to every
     core, and workers x cores spinning threads on the same cores ran slower than one process.
     """
-    per_worker = max(1, (cores or os.cpu_count() or 1) // max(1, workers))
+    per_worker = per_worker or max(1, (cores or os.cpu_count() or 1) // max(1, workers))
     return {name: str(per_worker) for name in THREAD_ENV}
 
 
@@ -238,9 +241,11 @@ def run_sweep(
     dask_address: str | None = None,
     workers: int = 2,
     serial: bool = False,
+    worker_threads: int | None = None,
 ) -> SweepOutcome:
     """Run a sweep (a file, or its plan); ``serial`` runs the jobs one by one in this process
-    (reference timing). A variant whose stage fails is reported in ``errors``; the others
+    (reference timing). Local workers get ``worker_threads`` numerical threads each (default:
+    the cores shared out). A variant whose stage fails is reported in ``errors``; the others
     run to the end."""
     from prefect.settings import PREFECT_API_URL, temporary_settings
 
@@ -253,7 +258,8 @@ def run_sweep(
         scratch = Path(plan.run_dir).resolve() / "dask"
         scratch.mkdir(parents=True, exist_ok=True)
         os.environ.setdefault("DASK_TEMPORARY_DIRECTORY", str(scratch))
-        local = None if dask_address else LocalDask(workers, scratch, worker_thread_env(workers))
+        env = worker_thread_env(workers, per_worker=worker_threads)
+        local = None if dask_address else LocalDask(workers, scratch, env)
         try:  # the local cluster comes up while Prefect's server does
             url, local_api = _prefect_api()
             if local is None:
