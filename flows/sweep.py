@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import dask
-from distributed import LocalCluster
+from distributed import Client, LocalCluster
 from prefect import flow, task
 from prefect.cache_policies import NONE
 from prefect_dask import DaskTaskRunner
@@ -74,21 +74,21 @@ def sweep_flow(
 ) -> list[Outcome]:
     """Submit every job, each waiting for the jobs of its upstream stages; one outcome per
     job. A failed job fails only the jobs downstream of it: the others run to the end."""
-    futures = []
+    futures: dict[tuple[str, str, str], Any] = {}
     for job in jobs:
         named = sweep_stage.with_options(
             name=job.entry.stage, task_run_name=f"{job.entry.stage}-{job.entry.key[:8]}"
         )
-        deps = [futures[i] for i, j in enumerate(jobs) if j.ident in job.deps]
-        futures.append(named.submit(pipeline, configs[job.variant], job, cwd, wait_for=deps))
+        deps = [futures[d] for d in job.deps if d in futures]
+        futures[job.ident] = named.submit(pipeline, configs[job.variant], job, cwd, wait_for=deps)
     outcomes: dict[tuple[str, str, str], Outcome] = {}
-    for job, future in zip(jobs, futures, strict=True):  # deps come first
-        future.wait()
+    for job in jobs:  # deps come first
+        futures[job.ident].wait()
         if blocked(job, outcomes):
             outcomes[job.ident] = None
             continue
         try:
-            outcomes[job.ident] = future.result()
+            outcomes[job.ident] = futures[job.ident].result()
         except Exception as exc:  # the stage's error, or a worker lost too often (KilledWorker)
             outcomes[job.ident] = _error(exc)
     return list(outcomes.values())
@@ -150,28 +150,29 @@ def _prefect_api() -> tuple[str, bool]:
     return server.api_url, True
 
 
-def _check_cluster(address: str, local_api: bool, timeout_s: float = 60.0) -> None:
-    """Refuse, in one line, a scheduler that does not answer or has no worker within
-    ``timeout_s``, and workers on other machines when the Prefect API is this process's
-    temporary server (they cannot reach it)."""
-    from distributed import Client
-
+def _connect(address: str, timeout_s: float = 10.0) -> Client:
+    """A client of the scheduler at ``address``; a one-line error when none answers."""
     try:
-        client = Client(address, timeout=f"{timeout_s}s")
+        return Client(address, timeout=f"{timeout_s}s")
     except OSError as exc:
         raise ValueError(
             f"--dask-address {address}: no Dask scheduler answers there ({exc}); start one "
             "with `dask scheduler` or check the address"
         ) from None
-    with client:
-        try:
-            client.wait_for_workers(1, timeout=timeout_s)
-        except TimeoutError:
-            raise ValueError(
-                f"--dask-address {address}: the scheduler has no workers; start them with "
-                f"`dask worker {address} --nthreads 1 --preload flows.worker_preload`"
-            ) from None
-        hosts = set(client.run(socket.gethostname).values())
+
+
+def _check_workers(client: Client, address: str, local_api: bool, timeout_s: float = 60.0) -> None:
+    """Refuse, in one line, a cluster with no worker within ``timeout_s``, and workers on
+    other machines when the Prefect API is this process's temporary server (they cannot
+    reach it)."""
+    try:
+        client.wait_for_workers(1, timeout=timeout_s)
+    except TimeoutError:
+        raise ValueError(
+            f"--dask-address {address}: the scheduler has no workers; start them with "
+            f"`dask worker {address} --nthreads 1 --preload flows.worker_preload`"
+        ) from None
+    hosts = set(client.run(socket.gethostname).values())
     if local_api and hosts - {socket.gethostname()}:
         raise ValueError(
             f"--dask-address {address}: workers on {', '.join(sorted(hosts))} cannot reach this "
@@ -260,10 +261,12 @@ def run_sweep(
         os.environ.setdefault("DASK_TEMPORARY_DIRECTORY", str(scratch))
         env = worker_thread_env(workers, per_worker=worker_threads)
         local = None if dask_address else LocalDask(workers, scratch, env)
-        try:  # the local cluster comes up while Prefect's server does
+        client = _connect(dask_address) if dask_address else None
+        try:  # the cluster comes up while Prefect's server does
             url, local_api = _prefect_api()
-            if local is None:
-                _check_cluster(str(dask_address), local_api)
+            if client is not None:
+                with client:
+                    _check_workers(client, dask_address, local_api)
             else:
                 dask_address = local.wait()
             runner = DaskTaskRunner(address=dask_address)
@@ -271,9 +274,12 @@ def run_sweep(
             with temporary_settings({PREFECT_API_URL: url}):  # handed to every task
                 flow_run = sweep_flow.with_options(task_runner=runner)
                 outcomes = flow_run(plan.pipeline, dumped, plan.jobs, os.getcwd())
-        finally:
+        except BaseException:
             if local is not None:
-                closing = local.close_in_background()
+                local.close_in_background().join()
+            raise
+        if local is not None:
+            closing = local.close_in_background()
     else:
         outcomes = []
     seconds = time.perf_counter() - t0

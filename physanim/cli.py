@@ -168,25 +168,12 @@ def run(
     t0 = time.perf_counter()
     dag = _pipeline(pipeline)
     cfg = load(dag, config, set_, dataset)
-    from physanim.pipeline.progress import rich_progress
-
     _tidy_up()
-    if dag.prepare is not None:
-        with rich_progress(console) as progress:
-            made = dag.prepare(cfg, progress)
-        if made:
-            console.print(f"generated {made}")
+    _prepare(dag, cfg)
     store, entries = _plan(dag, cfg, only, start, force, checksums=verify)
     for leftover in store.remove_stale_temporaries():
         console.print(f"removed abandoned partial output {leftover.name}")
-    for e in entries:
-        if e.damage and e.action == "run":
-            moved = store.quarantine(e.stage, e.key, e.damage)
-            console.print(
-                f"[red]{e.stage}/{e.key[:12]} is damaged[/red] ({escape(e.damage)}): moved to "
-                f"{escape(str(moved))}; recomputing it",
-                highlight=False,
-            )
+    _quarantine(store, entries)
     todo = [e for e in entries if e.action == "run"]
     info = {
         "configs": [str(c) for c in config or []],
@@ -249,6 +236,29 @@ def _execute(
         record_run(store, dag, {e.stage: e.key for e in entries}, info)
         raise
     record_run(store, dag, {e.stage: e.key for e in entries}, info)
+
+
+def _prepare(dag: Pipeline, cfg: BaseModel) -> None:
+    """Make what the pipeline needs before it can be planned (the demo dataset), saying so."""
+    from physanim.pipeline.progress import rich_progress
+
+    if dag.prepare is not None:
+        with rich_progress(console) as progress:
+            made = dag.prepare(cfg, progress)
+        if made:
+            console.print(f"generated {made}")
+
+
+def _quarantine(store: StageStore, entries: list[PlanEntry]) -> None:
+    """Move the damaged outputs that the plan recomputes out of the way, saying where."""
+    for e in entries:
+        if e.damage and e.action == "run":
+            moved = store.quarantine(e.stage, e.key, e.damage)
+            console.print(
+                f"[red]{e.stage}/{e.key[:12]} is damaged[/red] ({escape(e.damage)}): moved to "
+                f"{escape(str(moved))}; recomputing it",
+                highlight=False,
+            )
 
 
 def _tidy_up() -> None:
@@ -499,11 +509,13 @@ def sweep(
     from flows.dags import get_pipeline
     from physanim.pipeline.sweep import plan_sweep
 
+    _tidy_up()
     try:  # every variant is valid and planned before anything starts
-        plan = plan_sweep(file, get_pipeline)
+        plan = plan_sweep(file, get_pipeline, prepare=_prepare)
     except (ConfigError, ValueError) as exc:  # an invalid variant, an unknown pipeline
         raise _fail(str(exc)) from None
-    _tidy_up()
+    for job in plan.jobs:
+        _quarantine(StageStore(job.store), [job.entry])
     from flows.prefect_env import configure
 
     configure(plan.run_dir)

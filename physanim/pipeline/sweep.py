@@ -147,11 +147,17 @@ class SweepPlan:
         return self.configs[self.variants[0].name].dataset.run_dir  # type: ignore[attr-defined]
 
 
-def plan_sweep(path: str | Path, pipeline_of: Callable[[str], Pipeline]) -> SweepPlan:
+def plan_sweep(
+    path: str | Path,
+    pipeline_of: Callable[[str], Pipeline],
+    prepare: Callable[[Pipeline, BaseModel], None] | None = None,
+) -> SweepPlan:
     """Expand a sweep file, validate every variant's config and merge their plans.
 
-    ``pipeline_of`` turns the file's ``pipeline`` into a Pipeline (``flows.dags.get_pipeline``).
-    Raises ConfigError naming the file and variant when a variant's config is invalid.
+    ``pipeline_of`` turns the file's ``pipeline`` into a Pipeline (``flows.dags.get_pipeline``);
+    ``prepare(pipeline, config)`` runs for each variant before it is planned (the CLI makes
+    the demo dataset there, as ``run`` does). Raises ConfigError naming the file and variant
+    when a variant's config is invalid.
     """
     path = Path(path)
     spec, variants = load_sweep(path)
@@ -165,9 +171,13 @@ def plan_sweep(path: str | Path, pipeline_of: Callable[[str], Pipeline]) -> Swee
             )
         except ConfigError as exc:
             raise ConfigError(f"{path}: variant {v.name!r}: {exc}") from None
+        configs[v.name] = cfg
+    for v in variants:
+        cfg = configs[v.name]
+        if prepare is not None:
+            prepare(pipeline, cfg)
         store = StageStore(cfg.dataset.store_path)  # type: ignore[attr-defined]
         store.remove_stale_temporaries()
-        configs[v.name] = cfg
         plans[v.name] = (str(store.root), make_plan(pipeline, cfg, store))
     return SweepPlan(
         path=path,

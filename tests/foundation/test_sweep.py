@@ -129,3 +129,30 @@ def test_a_failing_variant_leaves_the_others_complete(data_folder: Path, tmp_pat
         f"failed: {error}".replace("'", "&#x27;"),
     ]
     report_links_resolve(report)
+
+
+def test_dask_address_without_a_scheduler_is_one_line() -> None:
+    from flows.sweep import _connect, _free_port
+
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    with pytest.raises(ValueError, match=rf"^--dask-address {address}: no Dask scheduler answers"):
+        _connect(address, timeout_s=1.0)
+
+
+def test_a_damaged_output_is_quarantined_and_computed_again(data_folder: Path) -> None:
+    sweep = data_folder / "damage.yaml"
+    (ROOT / sweep).write_text(
+        f"pipeline: {TOY}\ndatasets: [{data_folder / 'toy'}]\ngrid: {{scale.factor: [1.0, 2.0]}}\n"
+    )
+    assert physanim("sweep", str(sweep), "--serial").returncode == 0
+    store = StageStore(ROOT / data_folder / "toy" / "runs" / "store.zarr")
+    (key,) = store.keys("source")
+    chunk = next(p for p in (store.root / "source" / key / "ramp").rglob("*") if p.is_file()
+                 and p.name != "zarr.json")  # fmt: skip
+    chunk.unlink()
+    out = physanim("sweep", str(sweep), "--serial")
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert f"source/{key[:12]} is damaged" in out.stderr and "source: ran in" in out.stderr
+    assert len(store.quarantined()) == 2  # the group and its reason
+    verify = physanim("verify", "-p", TOY, "--dataset", str(data_folder / "toy"))
+    assert verify.returncode == 0, verify.stderr

@@ -27,14 +27,6 @@ from tests.foundation.toy_stages import executions
 DASK = str(Path(sys.executable).with_name("dask"))
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
 def _stop(procs: list[subprocess.Popen]) -> None:
     """SIGTERM, then SIGKILL what is still running after 30 s."""
     for p in procs:
@@ -56,6 +48,8 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Pat
 
     The sweep starts at once: it waits for the workers itself while its Prefect server starts.
     """
+    from flows.sweep import _free_port
+
     folder = tmp_path_factory.mktemp("cluster")
     address = f"tcp://127.0.0.1:{_free_port()}"
     env = physanim_env(PHYSANIM_TOY_LOG=str(folder / "executions.log"))
