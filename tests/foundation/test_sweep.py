@@ -85,6 +85,7 @@ def test_sweep_on_dask_computes_shared_stage_once(toy_config: Path, tmp_path: Pa
     cells = [float(c) for c in re.findall(r'<td class="num">([^<]+)</td>', row.group(1))]
     assert cells == pytest.approx([base, 2 * base, 3 * base], rel=1e-3)
     assert (sweeps / "timeline.png").stat().st_size > 1000 and "timeline.png" in report
+    report_links_resolve(sweeps / "index.html")  # an absolute run directory
 
 
 def report_links_resolve(report: Path) -> list[str]:
@@ -98,7 +99,8 @@ def report_links_resolve(report: Path) -> list[str]:
 
 def test_a_failing_variant_leaves_the_others_complete(data_folder: Path, tmp_path: Path) -> None:
     """The README's command, serially: the failing variant's error is in the report, the
-    summary and the output (exit code 1); the other variants run to the end."""
+    summary and the output (exit code 1); the other variants run to the end. Run again with
+    a damaged output, the sweep quarantines it and computes it again."""
     sweep = data_folder / "fail.yaml"
     (ROOT / sweep).write_text(
         f"pipeline: {TOY}\ndatasets: [{data_folder / 'toy'}]\ngrid: {{scale.factor: [1.0, 2.0]}}\n"
@@ -129,6 +131,17 @@ def test_a_failing_variant_leaves_the_others_complete(data_folder: Path, tmp_pat
         f"failed: {error}".replace("'", "&#x27;"),
     ]
     report_links_resolve(report)
+    # again, with a chunk of the good variants' source lost: it is quarantined and recomputed
+    store = StageStore(ROOT / data_folder / "toy" / "runs" / "store.zarr")
+    key = summary["variants"][0]["keys"]["source"]
+    chunks = (store.root / "source" / key / "ramp" / "c").rglob("*")
+    next(p for p in chunks if p.is_file()).unlink()
+    out = physanim("sweep", str(sweep), "--serial")
+    assert out.returncode == 1 and f"source/{key[:12]} is damaged" in out.stderr
+    assert re.findall(r"^(\w+): ran in", out.stderr, re.M) == ["source"]  # the rest cached
+    assert len(store.quarantined()) == 2  # the group and its reason
+    verify = physanim("verify", "-p", TOY, "--dataset", str(data_folder / "toy"))
+    assert verify.returncode == 0, verify.stderr
 
 
 def test_dask_address_without_a_scheduler_is_one_line() -> None:
@@ -137,22 +150,3 @@ def test_dask_address_without_a_scheduler_is_one_line() -> None:
     address = f"tcp://127.0.0.1:{_free_port()}"
     with pytest.raises(ValueError, match=rf"^--dask-address {address}: no Dask scheduler answers"):
         _connect(address, timeout_s=1.0)
-
-
-def test_a_damaged_output_is_quarantined_and_computed_again(data_folder: Path) -> None:
-    sweep = data_folder / "damage.yaml"
-    (ROOT / sweep).write_text(
-        f"pipeline: {TOY}\ndatasets: [{data_folder / 'toy'}]\ngrid: {{scale.factor: [1.0, 2.0]}}\n"
-    )
-    assert physanim("sweep", str(sweep), "--serial").returncode == 0
-    store = StageStore(ROOT / data_folder / "toy" / "runs" / "store.zarr")
-    (key,) = store.keys("source")
-    chunk = next(p for p in (store.root / "source" / key / "ramp").rglob("*") if p.is_file()
-                 and p.name != "zarr.json")  # fmt: skip
-    chunk.unlink()
-    out = physanim("sweep", str(sweep), "--serial")
-    assert out.returncode == 0, out.stderr[-3000:]
-    assert f"source/{key[:12]} is damaged" in out.stderr and "source: ran in" in out.stderr
-    assert len(store.quarantined()) == 2  # the group and its reason
-    verify = physanim("verify", "-p", TOY, "--dataset", str(data_folder / "toy"))
-    assert verify.returncode == 0, verify.stderr

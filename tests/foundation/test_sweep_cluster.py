@@ -92,7 +92,7 @@ def test_sweep_on_an_existing_cluster_survives_a_killed_worker(
     data = data_folder / "toy"
     sweep = data_folder / "cluster.yaml"
     (ROOT / sweep).write_text(
-        f"pipeline: {TOY}\ndatasets: [{data}]\nset: {{source.slow_s: 0.5}}\n"
+        f"pipeline: {TOY}\ndatasets: [{data}]\nset: {{source.slow_s: 0.3}}\n"
         "grid: {scale.factor: [1.0, 2.0, 3.0]}\n"
         "variants: [{name: broken, set: {source.fail_at: 0}}]\n"
     )
