@@ -150,31 +150,32 @@ def _against_truth(ctx, params, aligned, mesh, disp) -> dict[str, object]:
         motion_fidelity,
     )
     from physanim.evaluate.truth import load_truth
+    from physanim.mesh.embed import embedding_matrix
+    from physanim.mesh.kinematic import blend_frames
     from physanim.mesh.seam import MouthLine
 
     truth = load_truth(ctx.dataset_dir / params.truth, disp.shape[0])
     names = list(aligned.attrs["landmark_names"])
     landmarks = dict(zip(names, aligned["landmarks"][...], strict=True))
     mouth = MouthLine(aligned["mouth_line"][...], float(aligned.attrs["lip_band_m"]))
-    nodes, skin, side = mesh["nodes"][...], np.nonzero(mesh["skin"][...])[0], mesh["side"][...]
+    nodes, skin = mesh["nodes"][...], np.nonzero(mesh["skin"][...])[0]
     scan_v, scan_side = aligned["scan_vertices"][...], aligned["scan_side"][...]
     rng = np.random.default_rng(0)
     scan_idx = np.sort(rng.choice(len(scan_v), min(len(scan_v), params.error_max_points), False))
-    lips = lip_midline_points(mouth, scan_v, scan_side, params.lip_offset_m)
-    lip_nodes = [
-        skin[np.argmin(np.where(side[skin] == scan_side[i], 1.0, np.inf)
-                       * np.linalg.norm(nodes[skin] - scan_v[i], axis=1))]
-        for i in lips
-    ]  # fmt: skip
-    true_lips = follow_truth(scan_v[list(lips)], truth.vertices, truth.faces).displacement
-    true_gap = lip_gap(*(scan_v[list(lips)][None] + true_lips).transpose(1, 0, 2))
+    lips = list(lip_midline_points(mouth, scan_v, scan_side, params.lip_offset_m))
+    tets = mesh["tets"][...]
+    embed = embedding_matrix(  # the FEM moves the lip points as it moves the rendered scan
+        scan_v[lips], scan_side[lips], nodes, tets, mouth.side(nodes[tets].mean(axis=1))
+    )
+    true_lips = follow_truth(scan_v[lips], truth.vertices, truth.faces).displacement
+    true_gap = lip_gap(*(scan_v[lips][None] + true_lips).transpose(1, 0, 2))
     kin = aligned["kinematic"]
     models = {
-        "fem": (nodes[skin], disp[:, skin], nodes[lip_nodes] + disp[:, lip_nodes]),
+        "fem": (nodes[skin], disp[:, skin], scan_v[lips] + blend_frames(embed, disp)),
         "kinematic": (
             scan_v[scan_idx],
             kin.get_orthogonal_selection((slice(None), scan_idx, slice(None))) - scan_v[scan_idx],
-            kin.get_orthogonal_selection((slice(None), list(lips), slice(None))),
+            kin.get_orthogonal_selection((slice(None), lips, slice(None))),
         ),
     }
     peaks = truth.peak_frames()

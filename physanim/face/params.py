@@ -94,9 +94,9 @@ class DriveParams(BaseModel):
         None, description="driving landmarks (default: every tracked landmark but 'exclude')"
     )
     exclude: list[str] = Field(
-        default_factory=lambda: ["cphs_L", "cphs_R"],
-        description="landmarks left to the physics (default: the philtrum ridges, whose "
-        "material the regional models edit)",
+        default_factory=lambda: ["cphs_L", "cphs_R", "cphi_L", "cphi_R"],
+        description="landmarks left to the physics (default: the philtrum ridges, top and "
+        "bottom, whose material the regional models edit)",
     )
     radius_m: float = Field(
         0.005, gt=0.0, le=0.05, description="radius of each landmark's skin patch, m"

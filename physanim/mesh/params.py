@@ -165,7 +165,11 @@ class MaterialsParams(BaseModel):
         0.012, gt=0.0, le=0.1, description="Radius of the Cheek regions about cheek_L/R, metres."
     )
     radius_cphs_m: float = Field(
-        0.008, gt=0.0, le=0.1, description="Radius of cphs_L / cphs_R about their points, metres."
+        0.004,
+        gt=0.0,
+        le=0.1,
+        description="Radius of cphs_L / cphs_R about their points, metres (the philtrum "
+        "ridges are about 7 mm apart: wider regions would overlap).",
     )
     radius_cheilion_m: float = Field(
         0.010, gt=0.0, le=0.1, description="Radius of the Cheilion regions about ch_L/R, metres."

@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from flows.dags import FACE
 from physanim.config import load_config
@@ -95,27 +96,46 @@ def test_every_stage_runs_and_writes_its_outputs(demo_run) -> None:
     assert ok and frame.std() > 10 and frame.shape[1] > 4 * 120
 
 
-def test_driven_nodes_follow_the_landmarks_and_the_skin_lags_between(demo_run) -> None:
+def test_skull_holds_the_mandible_turns_and_landmarks_pull_patches(demo_run) -> None:
+    """Bone-side nodes: fixed (skull) or turned exactly by the estimated jaw rotation
+    (mandible); the jaw opens at the jaw-drop; springs hold at most a quarter of the skin and
+    the rest of the skin moves by physics."""
     _, cfg, store, _ = demo_run
-    aligned, mesh, sim = store.open("align"), store.open("tetra"), store.open("simulate")
-    names = list(aligned.attrs["landmark_names"])
-    driven = sim["driven_nodes"][...]
-    disp = sim["displacements"][...]
-    motion = aligned["motion"][...]
-    landmark_node = mesh["landmark_node"][...]
-    vertices = aligned["landmark_vertices"][...]
-    for name in cfg.simulate.drive:
-        i = names.index(name)
-        node = landmark_node[i]
-        assert node in driven
-        expected = motion[:, vertices[i]] - motion[0, vertices[i]]
-        np.testing.assert_allclose(disp[:, node], expected, atol=1e-6)  # m, float32 output
-    # free skin moves (driven by elasticity) but less than the most-moving driven node
+    mesh, sim = store.open("tetra"), store.open("simulate")
+    nodes, disp = mesh["nodes"][...], sim["displacements"][...].astype(np.float64)
+    bone, weight = sim["bone_nodes"][...], sim["mandible_weight"][...]
+    assert np.array_equal(np.sort(bone), np.nonzero(mesh["bone"][...])[0])
+    skull = bone[weight == 0]
+    assert len(skull) > 100 and np.abs(disp[:, skull]).max() == 0.0
+    angle, pivot, axis = (sim[f"jaw/{k}"][...] for k in ("angle", "pivot", "axis"))
+    assert np.degrees(angle.max()) > 3.0  # the demo's jaw drop (11.5 deg at full opening)
+    assert axis[0] > 0.95  # a left-right hinge
+    turn = Rotation.from_rotvec(angle[:, None] * axis).as_matrix() - np.eye(3)
+    expected = weight[None, :, None] * np.einsum("tij,kj->tki", turn, nodes[bone] - pivot)
+    np.testing.assert_allclose(disp[:, bone], expected, atol=1e-6)  # m, float32 output
+    assert (weight == 1).sum() >= 20  # the chin's bone side turns fully
     skin = np.nonzero(mesh["skin"][...])[0]
-    free = np.setdiff1d(skin, driven)
-    peak_free = np.linalg.norm(disp[:, free], axis=-1).max()
-    peak_driven = np.linalg.norm(disp[:, driven], axis=-1).max()
-    assert 0 < peak_free <= 1.5 * peak_driven
+    springs = sim["spring_nodes"][...]
+    assert np.isin(springs, skin).all() and 0 < len(springs) <= 0.25 * len(skin)
+    free = np.setdiff1d(skin, springs)
+    moving = np.linalg.norm(disp[:, free], axis=-1).max(axis=0) > 1e-4
+    assert moving.mean() > 0.3  # the physics carries the motion beyond the patches
+
+
+def test_the_simulated_face_performs_the_capture(demo_run) -> None:
+    """Against the demo's ground truth: the FEM mouth opens at the jaw-drop by about as much
+    as the actor's (coarse mesh: within a factor 1.5), the FEM skin moves like the actor far
+    better than a face that does not move (relative error 1), and no stress hot spot."""
+    _, _, store, _ = demo_run
+    summary = store.provenance("evaluate")["summary"]
+    evaluated = store.open("evaluate")
+    gap, fidelity = summary["lip_gap_mm"], summary["fidelity"]["fem"]
+    opened = {m: gap[m]["jaw_open"] - evaluated[f"lip_gap_{m}"][0] * 1e3 for m in ("truth", "fem")}
+    message = f"lip gap {gap}, opening {opened}, fidelity {fidelity}"
+    assert opened["truth"] > 3.0, message  # the actor's mouth opens by millimetres
+    assert opened["truth"] / 1.5 < opened["fem"] < 1.5 * opened["truth"], message
+    assert fidelity["jaw_open"]["overall"] < 0.6 and fidelity["smile"]["overall"] < 0.8, message
+    assert store.provenance("simulate")["summary"]["peak_to_p99_von_mises"] <= 5.0
 
 
 def test_material_edit_reruns_materials_onward_only(model2_run) -> None:
@@ -137,34 +157,26 @@ def test_material_edit_reruns_materials_onward_only(model2_run) -> None:
     ]  # fmt: skip
 
 
-def test_regional_models_change_symmetry_as_physics_predicts(model_sweep) -> None:
-    """A stiffer right philtrum (model 2) moves less on the right than model 1; softer (3) more.
-
-    Measured on the free skin nodes of the cphs_R region against those of cphs_L.  The seed's
-    right-side stretch E_R (eq 4.39, landmarks ex, pi, al, cphi around ch) must move
-    monotonically with the cphs_R stiffness: models 2 and 3 fall on opposite sides of model 1.
-    """
+def test_regional_models_act_where_they_are_edited(model_sweep) -> None:
+    """Models 1-3 differ only in the right philtrum (cphs_R: model 2 stiffer, model 3 softer).
+    With the default drive, the softer right philtrum of model 3 moves at least 5 % more than
+    model 2's at its peak, and clearly more than the left philtrum changes (on the full demo
+    mesh the left changes by less than 5 %, see the README; this coarse mesh has only a few
+    tets per philtrum region); the seed's right-side stretch E_R (eq 4.39) moves
+    monotonically with the cphs_R stiffness."""
     data, variants, _, _ = model_sweep
     store = StageStore(ROOT / data / "runs" / "store.zarr")
     peak, stretch = {}, {}
     for model in ("model1", "model2", "model3"):
-        keys = variants[model]
-        mats = store.open("materials", keys["materials"])
-        sim = store.open("simulate", keys["simulate"])
-        names = list(mats.attrs["region_names"])
-        tets = store.open("tetra", keys["tetra"])["tets"][...]
-        labels = mats["tet_labels"][...]
-        disp = np.linalg.norm(sim["displacements"][...], axis=-1)
-        driven = sim["driven_nodes"][...]
-        per_side = []
-        for side in ("cphs_R", "cphs_L"):
-            nodes = np.setdiff1d(np.unique(tets[labels == names.index(side)]), driven)
-            per_side.append(disp[:, nodes].mean(axis=1).max())
-        peak[model] = per_side[0] / per_side[1]  # right / left
-        evaluated = store.open("evaluate", keys["evaluate"])
+        summary = store.provenance("evaluate", variants[model]["evaluate"])["summary"]
+        peak[model] = summary["philtrum_peak_mm"]
+        evaluated = store.open("evaluate", variants[model]["evaluate"])
         stretch[model] = float(np.abs(evaluated["fem/e_right"][...]).max())
-    print("right/left philtrum motion", peak, "max |E_R|", stretch)
-    assert peak["model2"] < peak["model1"] < peak["model3"]
+    print("philtrum peaks (mm)", peak, "max |E_R|", stretch)
+    right = peak["model3"]["right"] / peak["model2"]["right"] - 1.0
+    left = abs(peak["model3"]["left"] / peak["model2"]["left"] - 1.0)
+    assert right >= 0.05 and right > 1.5 * left
+    assert peak["model2"]["right"] < peak["model1"]["right"] < peak["model3"]["right"]
     assert (stretch["model2"] - stretch["model1"]) * (stretch["model3"] - stretch["model1"]) < 0
 
 
@@ -207,3 +219,37 @@ def test_dag_upstream_and_downstream_closures() -> None:
     assert FACE.upstream("tetra") == ["ingest", "track", "fit", "align", "tetra"]
     assert FACE.downstream("materials") == ["materials", "simulate", "evaluate", "render"]
     assert FACE.upstream("ingest") == ["ingest"]
+
+
+@pytest.fixture(scope="module")
+def seed_run(demo_run):
+    """``physanim run -c configs/drives/seed.yaml``: the seed's 7 prescribed points, every
+    bone-side node fixed (runs last: it moves the latest run)."""
+    data = demo_run[0]
+    out = physanim("run", "--dataset", str(data), "-c", COARSE, "-c", "configs/drives/seed.yaml")
+    assert out.returncode == 0, out.stderr[-3000:]
+    return configure(data, "configs/drives/seed.yaml")
+
+
+def test_seed_drive_prescribes_its_points_and_keeps_the_mouth_shut(seed_run) -> None:
+    """The seed's setting reproduces the thesis: each of the 7 points' nearest skin node
+    follows its tracked landmark exactly, the bone side is fixed, and the mouth stays shut."""
+    from physanim.face.drive import fill_gaps, head_frame
+
+    cfg, store = seed_run
+    keys = {e.stage: e.key for e in make_plan(FACE, cfg, store)}
+    sim, tracked = store.open("simulate", keys["simulate"]), store.open("track", keys["track"])
+    driving = list(sim.attrs["driving_landmarks"])
+    assert sorted(driving) == sorted(cfg.simulate.drive.landmarks)
+    disp = sim["displacements"][...]
+    names = list(tracked.attrs["names"])
+    traj, _ = fill_gaps(head_frame(tracked["points"][...], tracked["head_pose"][...]))
+    nodes = sim["driven_nodes"][...][-len(driving) :]
+    for name, node in zip(driving, nodes, strict=True):
+        expected = traj[:, names.index(name)] - traj[0, names.index(name)]
+        np.testing.assert_allclose(disp[:, node], expected, atol=1e-6)  # m, float32 output
+    assert np.abs(disp[:, sim["bone_nodes"][...]]).max() == 0.0
+    assert "jaw" not in sim
+    gap = store.provenance("evaluate", keys["evaluate"])["summary"]["lip_gap_mm"]
+    rest = store.open("evaluate", keys["evaluate"])["lip_gap_fem"][0] * 1e3
+    assert gap["fem"]["jaw_open"] - rest < 0.3 * (gap["truth"]["jaw_open"] - rest)

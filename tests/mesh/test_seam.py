@@ -1,0 +1,128 @@
+"""The lip seam: cutting tets and surfaces, side-aware binding; and embedding in tets."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import Delaunay
+
+from physanim.fem.materials import TetMaterials
+from physanim.fem.model import build_model
+from physanim.fem.statics import solve_static
+from physanim.mesh.embed import embedding_matrix
+from physanim.mesh.params import TetraParams
+from physanim.mesh.seam import (
+    _TET_FACES,
+    LOWER,
+    NONE,
+    UPPER,
+    MouthLine,
+    bind_across_seam,
+    cut_surface,
+    cut_tets,
+)
+from physanim.mesh.tetra import orient_and_check
+
+#: a curved mouth line across the middle of the block (m)
+MOUTH = MouthLine(np.array([[-0.015, 0.0005, 0.0], [0.0, 0.0015, 0.0], [0.015, 0.0005, 0.0]]))
+
+
+def block(nx=16, ny=11, nz=4):
+    """Tets of a grid over [-3, 3] x [-2, 2] x [-1, 0] cm (a slab of tissue), every cube split
+    into 6 tets around its main diagonal (Kuhn), so no tet reaches beyond its cube."""
+    axes = (np.linspace(-0.03, 0.03, nx), np.linspace(-0.02, 0.02, ny), np.linspace(-0.01, 0, nz))
+    g = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    idx = np.arange(len(g)).reshape(nx, ny, nz)
+    c = np.stack(
+        [idx[i : nx - 1 + i, j : ny - 1 + j, k : nz - 1 + k].ravel()
+         for i in (0, 1) for j in (0, 1) for k in (0, 1)], axis=1,
+    )  # fmt: skip  # cube corners, bit order (i, j, k)
+    paths = [(1, 3), (1, 5), (2, 3), (2, 6), (4, 5), (4, 6)]  # 0 -> a -> b -> 7
+    tets = np.concatenate([c[:, [0, a, b, 7]] for a, b in paths])
+    tets, _ = orient_and_check(g, tets, TetraParams(edge_length_m=0.004))
+    return g, tets
+
+
+def shared_faces_across(tets, side):
+    """Interior faces shared by an upper and a lower tet."""
+    faces = np.sort(tets[:, _TET_FACES].reshape(-1, 3), axis=1)
+    owner = np.repeat(np.arange(len(tets)), 4)
+    _, inv, counts = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    shared = counts[inv] == 2
+    order = np.argsort(inv[shared], kind="stable")
+    pairs = owner[shared][order].reshape(-1, 2)
+    s = side[pairs]
+    return pairs[s[:, 0] * s[:, 1] == -1]
+
+
+def test_cut_leaves_no_face_between_the_lips_but_at_the_corners() -> None:
+    nodes, tets = block()
+    tet_side = MOUTH.side(nodes[tets].mean(axis=1))
+    before = shared_faces_across(tets, tet_side)
+    cut = cut_tets(nodes, tets, MOUTH)
+    after = shared_faces_across(cut.elements, tet_side)
+    assert len(before) > 40 and cut.n_seam_faces == len(before)
+    assert len(cut.parent) > len(nodes)  # seam nodes were duplicated
+    # what stays joined is at the mouth corners only (within one grid step)
+    x = nodes[tets[after.ravel()]].mean(axis=1)[:, 0]
+    assert np.all(np.abs(np.abs(x) - 0.015) < 0.006), x
+    # every new node copies an original one at the same place
+    assert np.array_equal(cut.parent[: len(nodes)], np.arange(len(nodes)))
+    assert set(np.unique(cut.side)) == {LOWER, NONE, UPPER}
+
+
+def test_cut_lets_the_lower_lip_drop_while_the_upper_lip_stays() -> None:
+    """Pull the lower half of the block's bottom face down: across the seam the upper side
+    barely moves, while without the cut it is dragged along."""
+    nodes, tets = block()
+    moved = {}
+    for cut_it in (False, True):
+        if cut_it:
+            cut = cut_tets(nodes, tets, MOUTH)
+            x, t = cut.nodes(nodes), cut.elements
+        else:
+            x, t = nodes, tets
+        model = build_model(x, t, TetMaterials.uniform(len(t), 1e5, 0.3, 1.0, 1000.0))
+        bottom = np.nonzero(x[:, 2] < -0.0099)[0]
+        values = np.zeros((len(bottom), 3))
+        values[x[bottom, 1] < 0.0, 1] = -0.002  # the "mandible" drops 2 mm
+        dofs = (3 * bottom[:, None] + np.arange(3)).ravel()
+        d = solve_static(model.K, dofs, values.ravel()).reshape(-1, 3)
+        top = np.nonzero((x[:, 2] > -1e-4) & (np.abs(x[:, 0]) < 0.008))[0]
+        upper = top[(x[top, 1] > 0.006) & (x[top, 1] < 0.010)]  # clear of the seam
+        moved[cut_it] = np.abs(d[upper, 1]).mean()
+    assert moved[True] < 0.5 * moved[False], moved
+
+
+def test_surface_cut_and_binding_never_cross_the_seam() -> None:
+    g = np.stack(np.meshgrid(np.linspace(-0.03, 0.03, 31), np.linspace(-0.02, 0.02, 21)), -1)
+    v = np.c_[g.reshape(-1, 2), np.zeros(g.size // 2)]
+    f = Delaunay(v[:, :2]).simplices
+    cut = cut_surface(v, f, MOUTH)
+    vc, fc = cut.nodes(v), cut.elements
+    assert cut.n_seam_faces > 10 and len(vc) > len(v)
+    b = bind_across_seam(vc, cut.side, vc, fc, MOUTH)
+    tri_side = MOUTH.side(vc[fc].mean(axis=1))
+    assert not np.any(tri_side[b.triangle] * cut.side == -1)  # never the other lip
+    np.testing.assert_allclose(b.distance, 0.0, atol=1e-12)
+
+
+def test_embedding_reproduces_affine_motion_and_respects_the_seam() -> None:
+    """Points embedded in tets move exactly with an affine node displacement; across the
+    cut, upper-lip points follow only upper tets."""
+    nodes, tets = block()
+    cut = cut_tets(nodes, tets, MOUTH)
+    x, t = cut.nodes(nodes), cut.elements
+    rng = np.random.default_rng(1)
+    pts = rng.uniform([-0.029, -0.019, -0.0099], [0.029, 0.019, 0.0], (400, 3))
+    w = embedding_matrix(pts, MOUTH.side(pts), x, t, MOUTH.side(x[t].mean(axis=1)))
+    assert isinstance(w, sp.csr_array)
+    a = np.array([[0.01, -0.02, 0.005], [0.03, 0.0, -0.01], [0.0, 0.02, 0.01]])
+    u = x @ a.T + np.array([1e-3, 0.0, -2e-3])
+    np.testing.assert_allclose(w @ u, pts @ a.T + np.array([1e-3, 0.0, -2e-3]), atol=1e-12)
+    # open the lips: lower side nodes drop; upper-lip points do not follow
+    drop = np.where((cut.side == LOWER)[:, None], [0.0, -1e-3, 0.0], 0.0)
+    moved = w @ drop
+    upper = MOUTH.side(pts) == UPPER
+    assert upper.sum() > 10 and np.all(moved[upper, 1] == 0.0)
