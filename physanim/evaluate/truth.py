@@ -50,9 +50,7 @@ def load_truth(path: Path, n_frames: int) -> Truth:
             raise ValueError(f"{path}: ground truth lacks '{name}'")
     vertices = group["vertices_actor"]
     if vertices.shape[0] < n_frames:
-        raise ValueError(
-            f"{path}: ground truth has {vertices.shape[0]} frames, the run {n_frames}"
-        )
+        raise ValueError(f"{path}: ground truth has {vertices.shape[0]} frames, the run {n_frames}")
     expression = group["expression"][:n_frames] if "expression" in group else None
     return Truth(
         vertices=np.asarray(vertices[:n_frames], dtype=np.float64),
