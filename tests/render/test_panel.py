@@ -81,6 +81,9 @@ def test_write_mp4_without_ffmpeg_falls_back_to_opencv(tmp_path, monkeypatch):
     frames = [np.full((48, 64, 3), (10 * i, 100, 200 - 10 * i), np.uint8) for i in range(4)]
     path, codec = write_mp4(frames, tmp_path / "v.mp4", fps=30.0)
     assert codec == "vp09"
+    monkeypatch.undo()
+    _, codec = write_mp4(frames, tmp_path / "w.mp4", fps=30.0, ffmpeg=False)  # by choice
+    assert codec == "vp09" and (tmp_path / "w.mp4").stat().st_size > 0
     cap = cv2.VideoCapture(str(path))
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 4
 
