@@ -168,25 +168,12 @@ def run(
     t0 = time.perf_counter()
     dag = _pipeline(pipeline)
     cfg = load(dag, config, set_, dataset)
-    from physanim.pipeline.progress import rich_progress
-
     _tidy_up()
-    if dag.prepare is not None:
-        with rich_progress(console) as progress:
-            made = dag.prepare(cfg, progress)
-        if made:
-            console.print(f"generated {made}")
+    _prepare(dag, cfg)
     store, entries = _plan(dag, cfg, only, start, force, checksums=verify)
     for leftover in store.remove_stale_temporaries():
         console.print(f"removed abandoned partial output {leftover.name}")
-    for e in entries:
-        if e.damage and e.action == "run":
-            moved = store.quarantine(e.stage, e.key, e.damage)
-            console.print(
-                f"[red]{e.stage}/{e.key[:12]} is damaged[/red] ({escape(e.damage)}): moved to "
-                f"{escape(str(moved))}; recomputing it",
-                highlight=False,
-            )
+    _quarantine(store, entries)
     todo = [e for e in entries if e.action == "run"]
     info = {
         "configs": [str(c) for c in config or []],
@@ -250,6 +237,29 @@ def _execute(
         record_run(store, dag, {e.stage: e.key for e in entries}, info)
         raise
     record_run(store, dag, {e.stage: e.key for e in entries}, info)
+
+
+def _prepare(dag: Pipeline, cfg: BaseModel) -> None:
+    """Make what the pipeline needs before it can be planned (the demo dataset), saying so."""
+    from physanim.pipeline.progress import rich_progress
+
+    if dag.prepare is not None:
+        with rich_progress(console) as progress:
+            made = dag.prepare(cfg, progress)
+        if made:
+            console.print(f"generated {made}")
+
+
+def _quarantine(store: StageStore, entries: list[PlanEntry]) -> None:
+    """Move the damaged outputs that the plan recomputes out of the way, saying where."""
+    for e in entries:
+        if e.damage and e.action == "run":
+            moved = store.quarantine(e.stage, e.key, e.damage)
+            console.print(
+                f"[red]{e.stage}/{e.key[:12]} is damaged[/red] ({escape(e.damage)}): moved to "
+                f"{escape(str(moved))}; recomputing it",
+                highlight=False,
+            )
 
 
 def _tidy_up() -> None:
@@ -497,36 +507,31 @@ def sweep(
     serial: Annotated[bool, typer.Option(help="no Dask: one job after another here")] = False,
 ) -> None:
     """Run a parameter sweep; stages shared between variants are computed once."""
-    from physanim.pipeline.sweep import load_sweep
+    from flows.dags import get_pipeline
+    from physanim.pipeline.sweep import plan_sweep
 
-    try:
-        spec, variants = load_sweep(file)
-    except ConfigError as exc:
-        raise _fail(str(exc)) from None
-    pipeline = _pipeline(spec.pipeline)
-    for v in variants:  # every variant is valid before anything starts
-        try:
-            files = [pipeline.default_config, *v.configs]
-            cfg, _ = load_config(pipeline.config_model(), files, v.overrides)
-        except ConfigError as exc:
-            raise _fail(f"{file}: variant {v.name!r}: {exc}") from None
-    cfg = load(pipeline, list(map(Path, variants[0].configs)), list(variants[0].overrides), None)
     _tidy_up()
+    try:  # every variant is valid and planned before anything starts
+        plan = plan_sweep(file, get_pipeline, prepare=_prepare)
+    except (ConfigError, ValueError) as exc:  # an invalid variant, an unknown pipeline
+        raise _fail(str(exc)) from None
+    for job in plan.jobs:
+        _quarantine(StageStore(job.store), [job.entry])
     from flows.prefect_env import configure
 
-    configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
+    configure(plan.run_dir)
     from flows.sweep import run_sweep
 
     try:
-        outcome = run_sweep(file, dask_address=dask_address, workers=workers, serial=serial)
-    except (ConfigError, ValueError) as exc:  # an invalid variant, an impossible plan
+        outcome = run_sweep(plan, dask_address=dask_address, workers=workers, serial=serial)
+    except ValueError as exc:  # a scheduler that does not answer, workers it cannot serve
         raise _fail(str(exc)) from None
     for r in outcome.results:
         _log_result(r)
     table = Table(
         title=f"sweep {file.name}: {len(outcome.results)} stage run(s), {outcome.seconds:.1f} s"
     )
-    stages = [s.name for s in pipeline.stages]
+    stages = [s.name for s in plan.pipeline.stages]
     for col in ("variant", *stages):
         table.add_column(col)
     for name, keys in outcome.variants.items():
@@ -534,6 +539,10 @@ def sweep(
     Console().print(table)
     console.print(f"summary: {outcome.summary_path}")
     console.print(f"report: {outcome.report_path}")
+    if outcome.errors:
+        for name, error in outcome.errors.items():
+            console.print(f"[red]error:[/red] variant {escape(name)!r}: {escape(error)}")
+        raise typer.Exit(1)
 
 
 @app.command()

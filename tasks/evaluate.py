@@ -218,7 +218,7 @@ SPEC = StageSpec(
     name="evaluate",
     upstream=("track", "align", "tetra", "materials", "simulate"),
     params=EvaluateParams,
-    version="3",
+    version="4",
     compute=compute,
     doc="symmetry cost, mouth corners, lag, philtrum peaks; with truth: motion fidelity per "
     "region, lip gap, surface distance",

@@ -137,7 +137,7 @@ SPEC = StageSpec(
     name="simulate",
     upstream=("track", "align", "tetra", "materials"),
     params=SimulateStageParams,
-    version="2",
+    version="3",
     compute=compute,
     doc="viscoelastic FEM (Newmark); skull fixed, mandible turned by the estimated jaw, skin "
     "pulled by the tracked landmarks",

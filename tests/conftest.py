@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import uuid
@@ -31,6 +32,25 @@ def toy_config(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return cfg
 
 
+@contextlib.contextmanager
+def repo_data_folder() -> Iterator[Path]:
+    """A new folder ``data/pytest-<pid>-<random>`` (relative to the repository root, where
+    the README's commands run), removed at the end."""
+    folder = Path("data") / f"pytest-{os.getpid()}-{uuid.uuid4().hex[:6]}"
+    (ROOT / folder).mkdir(parents=True)
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(ROOT / folder, ignore_errors=True)
+
+
+@pytest.fixture
+def data_folder() -> Iterator[Path]:
+    """A folder under data/, relative to the repository root; removed after the test."""
+    with repo_data_folder() as folder:
+        yield folder
+
+
 @pytest.fixture(scope="session")
 def face_demo() -> Iterator[tuple[Path, str]]:
     """A coarse 12-frame face demo, made and run by the README's command from the repository
@@ -39,11 +59,8 @@ def face_demo() -> Iterator[tuple[Path, str]]:
     Yields (dataset directory relative to the repository root, the run's stderr); the folder
     is removed at the end of the session.
     """
-    folder = Path("data") / f"pytest-{os.getpid()}-{uuid.uuid4().hex[:6]}"
-    data = folder / "demo"
-    try:
+    with repo_data_folder() as folder:
+        data = folder / "demo"
         out = physanim("run", "--dataset", str(data), "-c", COARSE)
         assert out.returncode == 0, out.stderr[-3000:]
         yield data, out.stderr
-    finally:
-        shutil.rmtree(ROOT / folder, ignore_errors=True)

@@ -11,9 +11,10 @@ from __future__ import annotations
 import copy
 import math
 import re
+import types
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, Union, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ValidationError
@@ -156,6 +157,47 @@ def _origin(dotted: str, origins: Mapping[str, str]) -> str:
     return "(defaults)"
 
 
+def _model_of(annotation: Any) -> type[BaseModel] | None:
+    """The pydantic model a field holds: ``X``, ``X | None`` or ``Optional[X]`` (else None)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    if get_origin(annotation) in (Union, types.UnionType):
+        models = [a for a in get_args(annotation) if _model_of(a) is not None]
+        return models[0] if len(models) == 1 else None
+    return None
+
+
+def with_defaults(
+    model: type[BaseModel], tree: Mapping[str, Any], default: BaseModel | None = None
+) -> dict[str, Any]:
+    """``tree`` with every nested section it gives completed from the section's default.
+
+    A key that a file or ``--set`` gives inside a section whose default is a whole model
+    (``--set materials.model.default.E_kPa=96.2``, where ``materials.model`` defaults to the
+    uniform model) changes that one value: the section's other values stay the default's,
+    as they would if the default were written in the base file.  Values that are not models
+    (numbers, lists, mappings of names) replace the default's as a whole.  ``default``: the
+    instance whose values complete ``tree`` (None: the model's own field defaults).
+    """
+    out: dict[str, Any] = {}
+    for name, field in model.model_fields.items():
+        key = field.alias or name
+        if key in tree:
+            value, sub = tree[key], _model_of(field.annotation)
+            if sub is not None and isinstance(value, Mapping):
+                base = getattr(default, name) if default is not None else None
+                if base is None and not field.is_required():
+                    base = field.get_default(call_default_factory=True)
+                value = with_defaults(sub, value, base if isinstance(base, BaseModel) else None)
+            out[key] = value
+        elif default is not None:
+            given = getattr(default, name)
+            if field.is_required() or given != field.get_default(call_default_factory=True):
+                out[key] = default.model_dump(by_alias=True, include={name})[key]
+    out.update({k: v for k, v in tree.items() if k not in out})  # unknown keys: reported
+    return out
+
+
 def _allowed(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str]:
     """Field names accepted at the parent of ``loc`` (for unknown-key messages)."""
     current: Any = model
@@ -163,7 +205,7 @@ def _allowed(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str]:
         fields = getattr(current, "model_fields", None)
         if not fields or part not in fields:
             return []
-        current = fields[part].annotation
+        current = _model_of(fields[part].annotation)
     fields = getattr(current, "model_fields", None)
     return sorted(fields) if fields else []
 
@@ -202,11 +244,12 @@ def _non_finite(tree: Any, prefix: str = "") -> Iterator[tuple[str, float]]:
 def validate(model: type[M], tree: Mapping[str, Any], origins: Mapping[str, str]) -> M:
     """Validate a merged tree; raise ConfigError listing every problem with file and dotted key.
 
-    NaN and infinities are refused too: parameters enter content keys, which need finite
-    numbers.
+    A nested section that ``tree`` gives only in part is completed from its default first
+    (``with_defaults``).  NaN and infinities are refused too: parameters enter content keys,
+    which need finite numbers.
     """
     try:
-        result = model.model_validate(tree)
+        result = model.model_validate(with_defaults(model, tree))
     except ValidationError as exc:
         lines = []
         for err in exc.errors():

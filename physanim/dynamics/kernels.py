@@ -29,24 +29,27 @@ def _cross(ax, ay, az, bx, by, bz):
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
+@njit(cache=True, inline="always")
+def _axis_angle(ax, ay, az, angle):
+    """Entries (row by row) of the rotation by ``angle`` rad about the unit axis (Rodrigues)."""
+    c = math.cos(angle)
+    s = math.sin(angle)
+    v = 1.0 - c
+    return (
+        c + ax * ax * v, ax * ay * v - az * s, ax * az * v + ay * s,
+        ay * ax * v + az * s, c + ay * ay * v, ay * az * v - ax * s,
+        az * ax * v - ay * s, az * ay * v + ax * s, c + az * az * v,
+    )  # fmt: skip
+
+
 @njit(cache=True)
 def fk_one(parent, axis, offset, q, base_pos, base_rot, rot, pos):
     """Joint frames for one pose: ``rot`` (n, 3, 3) and ``pos`` (n, 3) filled in place."""
     n = parent.shape[0]
     for i in range(n):
-        ax, ay, az = axis[i, 0], axis[i, 1], axis[i, 2]
-        c = math.cos(q[i])
-        s = math.sin(q[i])
-        v = 1.0 - c
-        r00 = c + ax * ax * v
-        r01 = ax * ay * v - az * s
-        r02 = ax * az * v + ay * s
-        r10 = ay * ax * v + az * s
-        r11 = c + ay * ay * v
-        r12 = ay * az * v - ax * s
-        r20 = az * ax * v - ay * s
-        r21 = az * ay * v + ax * s
-        r22 = c + az * az * v
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = _axis_angle(
+            axis[i, 0], axis[i, 1], axis[i, 2], q[i]
+        )
         p = parent[i]
         rp = base_rot if p < 0 else rot[p]
         for k in range(3):
@@ -239,18 +242,7 @@ def _frames(parent, model, q, rot, pos, s):
     n = parent.shape[0]
     for i in range(n):
         ax, ay, az = model[i, 0], model[i, 1], model[i, 2]
-        c = math.cos(q[i])
-        sn = math.sin(q[i])
-        v = 1.0 - c
-        r00 = c + ax * ax * v
-        r01 = ax * ay * v - az * sn
-        r02 = ax * az * v + ay * sn
-        r10 = ay * ax * v + az * sn
-        r11 = c + ay * ay * v
-        r12 = ay * az * v - ax * sn
-        r20 = az * ax * v - ay * sn
-        r21 = az * ay * v + ax * sn
-        r22 = c + az * az * v
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = _axis_angle(ax, ay, az, q[i])
         p = parent[i]
         ox, oy, oz = model[i, 3], model[i, 4], model[i, 5]
         if p < 0:  # the base frame is the world frame

@@ -178,8 +178,10 @@ def face_drive(
         if skin_targets is None:
             raise DriveError("simulate.drive.mode=kinematic needs the kinematic scan targets")
         area = vertex_areas(nodes, _skin_faces(tets, skin))[free_skin]
-        k = params.kinematic_stiffness_N_per_m2 * area
-        springs = target_drive(free_skin, k, skin_targets)
+        on = area > 0  # skin nodes on no all-skin face (the rim's edge) carry no skin area
+        springs = target_drive(
+            free_skin[on], params.kinematic_stiffness_N_per_m2 * area[on], skin_targets[:, on]
+        )
         driving = ["kinematic scan"]
     elif not use:
         raise DriveError(

@@ -108,7 +108,7 @@ class DriveParams(BaseModel):
         default_factory=dict, description="per-landmark patch stiffness, N/m (name: value)"
     )
     kinematic_stiffness_N_per_m2: float = Field(
-        5e6,
+        5e7,
         gt=0.0,
         le=1e12,
         description="'kinematic' mode: spring stiffness per skin area, N/m per m^2",

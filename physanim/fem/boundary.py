@@ -65,6 +65,10 @@ class SpringDrive:
         return sp.diags(diag, format="csr")
 
 
+#: A landmark's patch always reaches at least this many nodes (see :func:`landmark_drive`).
+MIN_PATCH_NODES = 3
+
+
 def patch_weights(distance: NDArray, radius: NDArray) -> NDArray:
     """Smooth falloff (1 - (d/r)^2)^2 for d < r, else 0 (C1 at the rim); broadcasts."""
     s = np.clip(np.asarray(distance) / np.asarray(radius), 0.0, 1.0)
@@ -88,7 +92,8 @@ def landmark_drive(
     rest with sides (L,), ``landmark_displacements`` (T, L, 3) m; ``stiffness`` (L,) N/m,
     the total spring stiffness of each patch; ``radius_m`` (L,) patch radius, m.  A node in
     several patches gets the sum of their springs and the stiffness-weighted mean target.
-    The nearest node of each landmark is always in its patch.
+    Where the mesh is coarse, a patch widens to 1.5 times the distance of its
+    MIN_PATCH_NODES-th nearest node, so it never pulls a single node.
     """
     p = np.asarray(node_points, dtype=np.float64)
     lm = np.asarray(landmark_points, dtype=np.float64)
@@ -98,7 +103,14 @@ def landmark_drive(
     )
     compatible |= np.asarray(landmark_side)[:, None] == np.asarray(node_side)[None]
     dist = np.where(compatible, dist, np.inf)
-    w = patch_weights(dist, np.asarray(radius_m, dtype=np.float64)[:, None])
+    # on a coarse mesh a patch grows to reach its MIN_PATCH_NODES nearest nodes: a single
+    # pulled node is a point load, a stress hot spot
+    k = min(MIN_PATCH_NODES, dist.shape[1]) - 1
+    reach = 1.5 * np.partition(dist, k, axis=1)[:, k]
+    radius = np.maximum(
+        np.asarray(radius_m, dtype=np.float64), np.where(np.isfinite(reach), reach, 0)
+    )
+    w = patch_weights(dist, radius[:, None])
     nearest = np.argmin(dist, axis=1)
     w[np.arange(len(lm)), nearest] = np.maximum(w[np.arange(len(lm)), nearest], 1e-3)
     w /= w.sum(axis=1, keepdims=True)

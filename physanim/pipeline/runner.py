@@ -26,6 +26,18 @@ class StageFailed(RuntimeError):
         super().__init__(f"stage '{stage}' failed: {type(error).__name__}: {error}")
         self.stage = stage
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled as stage and message: Dask and Prefect send it from a worker."""
+        return (_stage_failed, (self.stage, str(self)))
+
+
+def _stage_failed(stage: str, message: str) -> StageFailed:
+    """A StageFailed with this stage and message (unpickling)."""
+    exc = StageFailed.__new__(StageFailed)
+    RuntimeError.__init__(exc, message)
+    exc.stage = stage
+    return exc
+
 
 @dataclass(frozen=True)
 class StageResult:

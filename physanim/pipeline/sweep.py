@@ -12,22 +12,25 @@ A sweep file (YAML)::
       - {name: soft, set: {materials.scale_E: 0.5}}
 
 Variants that share an upstream stage's key share its output: ``merge_plans`` keeps one job per
-distinct (stage, key), so shared stages are computed once for the whole sweep.
+distinct (stage, key), so shared stages are computed once for the whole sweep.  A job that
+fails fails the variants that use its output (``variant_errors``); the others complete.
 """
 
 from __future__ import annotations
 
 import itertools
 import json
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from physanim.config.loader import ConfigError, merge_sources, validate
-from physanim.pipeline.plan import PlanEntry
-from physanim.pipeline.spec import dataset_overrides
+from physanim.config.loader import ConfigError, load_config, merge_sources, validate
+from physanim.pipeline.plan import PlanEntry, make_plan
+from physanim.pipeline.spec import Pipeline, dataset_overrides
+from physanim.store import StageStore
 
 
 class NamedVariant(BaseModel):
@@ -123,3 +126,85 @@ def merge_plans(plans: dict[str, tuple[str, list[PlanEntry]]]) -> list[Job]:
                 deps = tuple((store, u, k) for u, k in e.upstream.items())
                 jobs[ident] = Job(store, e, variant, deps)
     return list(jobs.values())
+
+
+@dataclass(frozen=True)
+class SweepPlan:
+    """A planned sweep: its file, pipeline and variants, each variant's validated config,
+    store (path) and stage keys (stage -> key), and the distinct jobs to run."""
+
+    path: Path
+    pipeline: Pipeline
+    variants: list[Variant]
+    configs: dict[str, BaseModel]
+    stores: dict[str, str]
+    keys: dict[str, dict[str, str]]
+    jobs: list[Job]
+
+    @property
+    def run_dir(self) -> Path:
+        """Run directory of the first variant's dataset (sweep reports, Prefect home)."""
+        return self.configs[self.variants[0].name].dataset.run_dir  # type: ignore[attr-defined]
+
+
+def plan_sweep(
+    path: str | Path,
+    pipeline_of: Callable[[str], Pipeline],
+    prepare: Callable[[Pipeline, BaseModel], None] | None = None,
+) -> SweepPlan:
+    """Expand a sweep file, validate every variant's config and merge their plans.
+
+    ``pipeline_of`` turns the file's ``pipeline`` into a Pipeline (``flows.dags.get_pipeline``);
+    ``prepare(pipeline, config)`` runs for each variant before it is planned (the CLI makes
+    the demo dataset there, as ``run`` does). Raises ConfigError naming the file and variant
+    when a variant's config is invalid.
+    """
+    path = Path(path)
+    spec, variants = load_sweep(path)
+    pipeline = pipeline_of(spec.pipeline)
+    configs: dict[str, BaseModel] = {}
+    plans: dict[str, tuple[str, list[PlanEntry]]] = {}
+    for v in variants:
+        try:
+            cfg, _ = load_config(
+                pipeline.config_model(), [pipeline.default_config, *v.configs], v.overrides
+            )
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: variant {v.name!r}: {exc}") from None
+        configs[v.name] = cfg
+    for v in variants:
+        cfg = configs[v.name]
+        if prepare is not None:
+            prepare(pipeline, cfg)
+        store = StageStore(cfg.dataset.store_path)  # type: ignore[attr-defined]
+        store.remove_stale_temporaries()
+        plans[v.name] = (str(store.root), make_plan(pipeline, cfg, store))
+    return SweepPlan(
+        path=path,
+        pipeline=pipeline,
+        variants=variants,
+        configs=configs,
+        stores={name: store for name, (store, _) in plans.items()},
+        keys={name: {e.stage: e.key for e in plan} for name, (_, plan) in plans.items()},
+        jobs=merge_plans(plans),
+    )
+
+
+def blocked(job: Job, outcomes: Mapping[tuple[str, str, str], object]) -> bool:
+    """True when an upstream job of ``job`` ran in this sweep and did not succeed (its
+    outcome is an error text or None)."""
+    return any(d in outcomes and isinstance(outcomes[d], str | None) for d in job.deps)
+
+
+def variant_errors(plan: SweepPlan, failed: Mapping[tuple[str, str, str], str]) -> dict[str, str]:
+    """variant -> error of the first failed job whose output it needs (variants that need
+    none are absent); ``failed``: (store, stage, key) -> error text."""
+    errors = {}
+    for v in plan.variants:
+        store, keys = plan.stores[v.name], plan.keys[v.name]
+        for stage in (s.name for s in plan.pipeline.stages):
+            error = failed.get((store, stage, keys.get(stage, "")))
+            if error is not None:
+                errors[v.name] = error
+                break
+    return errors

@@ -24,8 +24,9 @@ MEDIA_SUFFIXES = (".mp4", ".webm", ".png")
 
 @dataclass(frozen=True)
 class SweepVariant:
-    """One variant of a sweep: its dataset, overrides, stage keys and summaries, and the
-    plain files (stage -> files directory) of its outputs."""
+    """One variant of a sweep: its dataset, overrides, stage keys and summaries, the plain
+    files (stage -> files directory) of its outputs, and its error if a stage it needs
+    failed (empty: it completed)."""
 
     name: str
     dataset: str
@@ -34,6 +35,7 @@ class SweepVariant:
     keys: Mapping[str, str]
     summaries: Mapping[str, Mapping[str, Any]]
     files: Mapping[str, Path] = field(default_factory=dict)
+    error: str = ""
 
 
 def varying_stages(variants: Sequence[SweepVariant]) -> list[str]:
@@ -60,6 +62,7 @@ def measures(variant: SweepVariant, stages: Sequence[str]) -> dict[str, Any]:
     """The dataset, configs, overrides and summaries of ``stages`` of one variant as
     measure name -> value."""
     out: dict[str, Any] = {
+        "status": f"failed: {variant.error}" if variant.error else "complete",
         "dataset": variant.dataset,
         "configs": " ".join(Path(c).name for c in variant.configs),
         "overrides": " ".join(variant.overrides),
@@ -70,13 +73,15 @@ def measures(variant: SweepVariant, stages: Sequence[str]) -> dict[str, Any]:
     return out
 
 
-def differing(table: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
+def differing(
+    table: Mapping[str, Mapping[str, Any]], always: Sequence[str] = ()
+) -> dict[str, dict[str, Any]]:
     """variant -> measure -> value, without the measures equal in every variant (unless
-    there is only one variant)."""
+    there is only one variant); ``always``: measures shown even when equal."""
     if len(table) < 2:
         return {k: dict(v) for k, v in table.items()}
     names = list(dict.fromkeys(m for v in table.values() for m in v))
-    keep = [m for m in names if len({repr(v.get(m)) for v in table.values()}) > 1]
+    keep = [m for m in names if m in always or len({repr(v.get(m)) for v in table.values()}) > 1]
     return {k: {m: v.get(m, "") for m in keep} for k, v in table.items()}
 
 
@@ -150,9 +155,11 @@ def write_sweep_report(
             variants_of.setdefault((stage, key), []).append(v.name)
     ran = [r for r in results if r.action == "ran"]
     table = {v.name: measures(v, stages) for v in variants}
-    shown = differing(table)
+    failed = [v for v in variants if v.error]
+    shown = differing(table, always=("status",) if failed else ())
     key_figures = {
         "variants": len(variants),
+        "failed variants": ", ".join(v.name for v in failed) or "none",
         "wall time (s)": round(seconds, 2),
         "stage runs (ran / cached)": f"{len(ran)} / {len(results) - len(ran)}",
         "stage seconds, summed": round(sum(r.seconds for r in ran), 2),

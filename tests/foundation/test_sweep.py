@@ -14,6 +14,7 @@ import pytest
 from physanim.config import ConfigError
 from physanim.pipeline.sweep import load_sweep
 from physanim.store import StageStore
+from tests.commands import physanim, physanim_env
 from tests.foundation.toy_stages import executions
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -84,3 +85,68 @@ def test_sweep_on_dask_computes_shared_stage_once(toy_config: Path, tmp_path: Pa
     cells = [float(c) for c in re.findall(r'<td class="num">([^<]+)</td>', row.group(1))]
     assert cells == pytest.approx([base, 2 * base, 3 * base], rel=1e-3)
     assert (sweeps / "timeline.png").stat().st_size > 1000 and "timeline.png" in report
+    report_links_resolve(sweeps / "index.html")  # an absolute run directory
+
+
+def report_links_resolve(report: Path) -> list[str]:
+    """Every src/href of a report, after checking that each names an existing file relative
+    to the report's folder (the links a browser opening it from disk follows)."""
+    links = re.findall(r"(?:src|href)='([^']+)'", report.read_text())
+    missing = [link for link in links if not (report.parent / link).is_file()]
+    assert not missing, f"{report}: links to missing files {missing}"
+    return links
+
+
+def test_a_failing_variant_leaves_the_others_complete(data_folder: Path, tmp_path: Path) -> None:
+    """The README's command, serially: the failing variant's error is in the report, the
+    summary and the output (exit code 1); the other variants run to the end. Run again with
+    a damaged output, the sweep quarantines it and computes it again."""
+    sweep = data_folder / "fail.yaml"
+    (ROOT / sweep).write_text(
+        f"pipeline: {TOY}\ndatasets: [{data_folder / 'toy'}]\ngrid: {{scale.factor: [1.0, 2.0]}}\n"
+        "variants: [{name: broken, set: {source.fail_at: 2}}]\n"
+    )
+    log = tmp_path / "executions.log"
+    out = physanim("sweep", str(sweep), "--serial", env=physanim_env(PHYSANIM_TOY_LOG=str(log)))
+    error = "stage 'source' failed: ValueError: bad frame 2 (source.fail_at)"
+    assert out.returncode == 1, out.stderr[-3000:]
+    assert f"error: variant 'broken': {error}" in out.stderr
+    assert sorted(executions(tmp_path)) == ["scale"] * 2 + ["source"] * 2 + ["total"] * 2
+    folder = ROOT / data_folder / "toy" / "runs" / "sweeps" / "fail"
+    summary = json.loads((folder / "summary.json").read_text())
+    assert {v["variant"]: v["error"] for v in summary["variants"]} == {
+        "scale.factor=1.0": None,
+        "scale.factor=2.0": None,
+        "broken": error,
+    }
+    totals = [v["summaries"]["total"]["total"] for v in summary["variants"][:2]]
+    base = 499500 * 8 + 1000 * 28
+    assert totals == pytest.approx([base, 2 * base])
+    report = folder / "index.html"
+    status = re.search(r"<tr><td>status</td>(.*?)</tr>", report.read_text())
+    assert status is not None
+    assert re.findall(r"<td>([^<]*)</td>", status.group(1)) == [
+        "complete",
+        "complete",
+        f"failed: {error}".replace("'", "&#x27;"),
+    ]
+    report_links_resolve(report)
+    # again, with a chunk of the good variants' source lost: it is quarantined and recomputed
+    store = StageStore(ROOT / data_folder / "toy" / "runs" / "store.zarr")
+    key = summary["variants"][0]["keys"]["source"]
+    chunks = (store.root / "source" / key / "ramp" / "c").rglob("*")
+    next(p for p in chunks if p.is_file()).unlink()
+    out = physanim("sweep", str(sweep), "--serial")
+    assert out.returncode == 1 and f"source/{key[:12]} is damaged" in out.stderr
+    assert re.findall(r"^(\w+): ran in", out.stderr, re.M) == ["source"]  # the rest cached
+    assert len(store.quarantined()) == 2  # the group and its reason
+    verify = physanim("verify", "-p", TOY, "--dataset", str(data_folder / "toy"))
+    assert verify.returncode == 0, verify.stderr
+
+
+def test_dask_address_without_a_scheduler_is_one_line() -> None:
+    from flows.sweep import _connect, _free_port
+
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    with pytest.raises(ValueError, match=rf"^--dask-address {address}: no Dask scheduler answers"):
+        _connect(address, timeout_s=1.0)

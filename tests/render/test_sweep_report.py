@@ -36,6 +36,7 @@ def test_only_differing_stages_and_measures_are_shown(tmp_path: Path) -> None:
     assert varying_stages([a, b]) == ["simulate"]
     assert varying_stages([a]) == ["tetra", "simulate"]
     assert measures(a, ["simulate"]) == {
+        "status": "complete",
         "dataset": "demo",
         "configs": "model1.yaml",
         "overrides": "dataset.name=demo",
