@@ -1,7 +1,10 @@
-"""Benchmark the FEM core on the demo face mesh (~20k DOF): assembly, factorisation, time
-per Newmark step and real-time factor, the default next to a plain-SuperLU baseline.
+"""Benchmark the FEM core on the demo face mesh (~15k DOF): the demo's ``simulate`` wall time
+and error against a dt = 0.5 ms float64 reference (fixed 1 ms steps, the previous default;
+adaptive steps in float64, the default; adaptive in mixed precision; medians of 3 runs), the
+BLAS under CHOLMOD, CHOLMOD's factorisations; then assembly, factorisation, time per Newmark
+step and real-time factor per solver, next to a plain-SuperLU baseline.
 
-Run: .venv/bin/python benchmarks/bench_fem.py [--baseline-steps 100]
+Run: .venv/bin/python benchmarks/bench_fem.py [--baseline-steps 100] [--repeats 3]
 Mesh, materials, fixed (bone-side) and driven nodes and the driven landmark trajectories are the
 demo pipeline's own (default config): its align, tetra and materials stages, computed into
 data/demo first when the store lacks them (several minutes, once).
@@ -11,14 +14,18 @@ from __future__ import annotations
 
 import argparse
 import resource
+import statistics
 import time
 from typing import Any
 
 import numba
 import numpy as np
+import scipy.sparse as sp
+from threadpoolctl import threadpool_limits
 
 from flows.dags import FACE
 from physanim.config import load_config
+from physanim.fem.linsolve import CholmodFactors, blas_in_use
 from physanim.fem.model import build_model
 from physanim.fem.newmark import Newmark, State
 from physanim.fem.params import SimulateParams
@@ -63,9 +70,78 @@ def time_steps(model, pres, dt, solver, n_steps):
     return t_fac, (time.perf_counter() - t0) / n_steps, nm
 
 
+def compare_stepping(sim: dict[str, Any], params: SimulateStageParams, repeats: int) -> None:
+    """The demo's simulate: reference, previous default and fast paths side by side."""
+    print(f"BLAS under CHOLMOD: {blas_in_use()}; numba threads: {numba.get_num_threads()}")
+    t0 = time.perf_counter()
+    ref_params = params.model_copy(update={"dt": 5e-4, "stepping": "fixed"})
+    ref = simulate(**sim, params=ref_params).displacements.astype(np.float64)
+    print(f"reference: fixed dt = 0.5 ms, float64, in {time.perf_counter() - t0:.1f} s (once)")
+    peak = np.linalg.norm(ref, axis=2).max()
+    rows = [
+        ("fixed dt = 1 ms (previous default)", {"stepping": "fixed"}),
+        ("adaptive, float64 (default)", {}),
+        ("adaptive, mixed precision", {"precision": "mixed"}),
+    ]
+    print(
+        f"\n{'simulate on the demo (3 s)':36s} {'wall s':>7s} {'runs s':>18s} {'steps':>6s} "
+        f"{'check':>6s} {'factor s':>8s} {'threads':>7s} {'err % peak':>10s} {'err mm':>7s}"
+    )
+    for name, update in rows:
+        walls, res = [], None
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            res = simulate(**sim, params=params.model_copy(update=update))
+            walls.append(time.perf_counter() - t0)
+        err = np.linalg.norm(res.displacements - ref, axis=2).max()
+        threads = "/".join(str(t) for t in sorted(set(res.solver_threads[1:])))
+        runs = ", ".join(f"{w:.1f}" for w in walls)
+        print(
+            f"{name:36s} {statistics.median(walls):7.2f} {runs:>18s} "
+            f"{res.frame_substeps.sum():6d} {res.check_steps:6d} "
+            f"{res.timings['factorization']:8.2f} {threads:>7s} {100 * err / peak:10.3f} "
+            f"{err * 1e3:7.4f}"
+        )
+    print(f"(peak displacement {peak * 1e3:.2f} mm; err: largest node distance to the reference)")
+
+
+def compare_factorizations(sim: dict[str, Any], repeats: int) -> None:
+    """Refactorising the demo's Newmark matrix (one frame per step) after the symbolic
+    analysis, up to a ready solver: supernodal LL^T of A_uu (default, BLAS-3) and simplicial
+    LDL^T of the sparser augmented matrix (the previous default)."""
+    model = build_model(sim["nodes"], sim["tets"], sim["materials"])
+    pres = (3 * sim["driven_idx"][:, None] + np.arange(3)).ravel()
+    ks = sim["springs"].matrix(model.n_dofs)
+    nm = Newmark(model.K + ks, model.M, model.C, sim["frame_dt"], pres)
+    h, u = nm.dt, nm.free
+    K_el, G, w = model.split
+    A_el = (K_el + ks + 4 / h**2 * model.M + 2 / h * model.C).tocsr()[u][:, u]
+    aug = sp.bmat([[A_el, G.tocsr()[:, u].T], [G.tocsr()[:, u], sp.diags(-1 / w)]], format="csc")
+    print(
+        f"\n{'CHOLMOD refactorisation, to a ready solver':44s} {'s (median)':>10s} {'L nnz':>10s}"
+    )
+    for name, mode, A in (
+        ("supernodal LL^T of A_uu (default)", "supernodal", nm.A_uu),
+        ("simplicial LDL^T of the augmented matrix", "simplicial", aug),
+    ):
+        for threads in (numba.get_num_threads(), 1):
+            with threadpool_limits(limits=threads, user_api="blas"):
+                factors = CholmodFactors(mode)
+                solver = factors(A)  # symbolic analysis, first numeric factor, solver layout
+                times = []
+                for _ in range(repeats):
+                    t0 = time.perf_counter()
+                    factors(A)
+                    times.append(time.perf_counter() - t0)
+            nnz = solver.vals.size + solver.tri.size // 2
+            label = f"{name}, {threads} BLAS thread(s)"
+            print(f"{label:44s} {statistics.median(times):10.3f} {nnz / 1e6:9.2f}M")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--baseline-steps", type=int, default=100, help="steps per solver row")
+    ap.add_argument("--repeats", type=int, default=3, help="runs per simulate row")
     args = ap.parse_args()
 
     sim, params = demo_inputs()
@@ -77,6 +153,8 @@ def main() -> None:
         f"{0 if springs is None else len(springs.nodes)} skin nodes on springs); "
         f"{len(traj)} frames at {1 / sim['frame_dt']:.0f} fps"
     )
+    compare_stepping(sim, params, args.repeats)
+    compare_factorizations(sim, args.repeats)
     pres = (3 * driven[:, None] + np.arange(3)).ravel()
     dt = params.dt
 
@@ -96,12 +174,12 @@ def main() -> None:
                 f"{name:34s} {t_asm:10.2f} {t_fac:9.2f} {1e3 * per_step:8.2f} {dt / per_step:6.2f}"
             )
 
-    res = simulate(**sim, params=params)
+    res = simulate(**sim, params=params.model_copy(update={"stepping": "fixed"}))
     n_steps = (len(traj) - 1) * res.n_substeps
     tm = res.timings
     per_step = tm["stepping"] / n_steps
     print(
-        f"\ndemo simulate stage (default: anp, consistent mass, auto solver): {n_steps} steps of "
+        f"\ndemo simulate, fixed steps (anp, consistent mass, auto solver): {n_steps} steps of "
         f"{res.dt * 1e3:.3f} ms in {tm['stepping']:.2f} s = {1e3 * per_step:.2f} ms/step incl. "
         f"per-frame energies, stress, inversion check; 1,000 steps in {1e3 * per_step:.2f} s "
         f"(target < 10 s); RTF {res.dt / per_step:.2f}; assembly {tm['assembly']:.2f} s, "

@@ -1,11 +1,18 @@
 """Prefect's overhead on a no-op run of a face-shaped DAG, side by side with the local runner.
 
 Prints wall times for: the local in-process runner, the first Prefect flow run (which starts a
-temporary API server with a fresh PREFECT_HOME), and a second flow run in the same process.
+temporary API server with a fresh PREFECT_HOME), and a second flow run in the same process;
+then whole ``physanim run`` commands: ``--local``, the first Prefect run of a run directory
+(which starts its shared server) and the next ones (which reuse it), medians of 3.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -37,6 +44,47 @@ def noop_dag(default: Path) -> Pipeline:
     return Pipeline("noop", tuple(stages), default)
 
 
+#: The no-op DAG as the CLI addresses it: ``-p benchmarks.bench_prefect_overhead:NOOP``.
+NOOP = noop_dag(Path(__file__).with_name("noop_default.yaml"))
+
+
+def cli_runs(repeats: int = 3) -> None:
+    """Wall time of whole ``physanim run`` commands on the no-op DAG (fresh stage keys)."""
+    root = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PREFECT_", "PHYSANIM_"))}
+    with tempfile.TemporaryDirectory() as tmp:
+        salt = iter(range(100, 10_000))
+
+        def run(*extra: str) -> float:
+            cmd = [
+                sys.executable,
+                "-m",
+                "physanim",
+                "run",
+                "-p",
+                "benchmarks.bench_prefect_overhead:NOOP",
+            ]
+            cmd += ["--dataset", f"{tmp}/noop", "--set", f"ingest.salt={next(salt)}", *extra]
+            t0 = time.perf_counter()
+            subprocess.run(cmd, cwd=root, env=env, check=True, capture_output=True)
+            return time.perf_counter() - t0
+
+        local = [run("--local") for _ in range(repeats)]
+        first = run()
+        reuse = [run() for _ in range(repeats)]
+        state = Path(tmp) / "noop" / "runs" / "prefect" / "server.json"
+        if state.exists():  # stop the shared server now rather than after its idle time
+            os.kill(json.loads(state.read_text())["pid"], signal.SIGTERM)
+            while state.exists():
+                time.sleep(0.2)
+    med_local, med_reuse = statistics.median(local), statistics.median(reuse)
+    print("physanim run on the no-op DAG (whole command; medians of 3):")
+    rows = (("--local", med_local), ("prefect, first run (starts server)", first),
+            ("prefect, next runs (reuse it)", med_reuse))  # fmt: skip
+    for name, wall in rows:
+        print(f"  {name:34s}: {wall:6.2f} s  (+{wall - med_local:5.2f} s over --local)")
+
+
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         cfg_file = Path(tmp) / "c.yaml"
@@ -62,6 +110,7 @@ def main() -> None:
     print(f"  local runner           : {local:6.2f} s")
     print(f"  prefect, first flow run: {first:6.2f} s  (overhead {first - local:5.2f} s)")
     print(f"  prefect, second run    : {second:6.2f} s  (overhead {second - local:5.2f} s)")
+    cli_runs()
 
 
 if __name__ == "__main__":

@@ -2,23 +2,33 @@
 
 Prefect keeps its profile, SQLite database and logs under ``PREFECT_HOME``; pointing it into the
 run directory keeps runs (and tests) away from the user's own Prefect profile.  With no
-``PREFECT_API_URL`` every flow run starts a temporary local API server (SQLite), which needs no
-network; its startup takes 10-20 s here, so the default 20 s timeout is raised.
+``PREFECT_API_URL`` every flow run would start a temporary local API server (SQLite), whose
+startup takes 10-25 s here; ``shared_server`` instead keeps one server per ``PREFECT_HOME``
+running between runs (same database, so the UI shows every run) and stops it after
+``PHYSANIM_PREFECT_IDLE_S`` seconds (default 600) without a run.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import json
 import os
+import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
-from physanim.processes import mark_children
+from physanim.processes import OWNER_ENV, mark_children, process_alive, start_time
+
+#: Seconds a shared server waits for the next run before it stops (``shared_server``).
+IDLE_ENV = "PHYSANIM_PREFECT_IDLE_S"
+_STATE, _LEASE, _LOCK = "server.json", "server.lease", "server.lock"
 
 #: Settings applied unless the user already set them in the environment.
 DEFAULTS = {
@@ -74,14 +84,9 @@ def prefect_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple
         return
     port = _free_port()
     url = f"http://127.0.0.1:{port}/api"
-    env = {**os.environ, "PREFECT_HOME": str(home)}
-    env.pop("PREFECT_API_URL", None)
+    cmd, env = _server_command(home, port)
     log = (home / "server.log").open("w")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "prefect", "server", "start", "--host", "127.0.0.1",
-         "--port", str(port)],
-        env=env, stdout=log, stderr=subprocess.STDOUT,
-    )  # fmt: skip
+    proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
     try:
         deadline = time.time() + startup_timeout
         while not _healthy(url):
@@ -96,3 +101,122 @@ def prefect_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple
         except subprocess.TimeoutExpired:
             proc.kill()
         log.close()
+
+
+def _server_command(home: Path, port: int) -> tuple[list[str], dict[str, str]]:
+    env = {**os.environ, "PREFECT_HOME": str(home)}
+    env.pop("PREFECT_API_URL", None)
+    cmd = [sys.executable, "-m", "prefect", "server", "start", "--host", "127.0.0.1",
+           "--port", str(port)]  # fmt: skip
+    return cmd, env
+
+
+def _running_shared(home: Path) -> str | None:
+    """URL of the shared server of ``home`` when its supervisor runs and it answers."""
+    try:
+        state = json.loads((home / _STATE).read_text())
+        pid, started, url = int(state["pid"]), float(state["started"]), str(state["url"])
+    except (OSError, ValueError, KeyError):
+        return None
+    alive = process_alive(pid) and abs((start_time(pid) or started) - started) < 2.0
+    return url if alive and _healthy(url) else None
+
+
+@contextlib.contextmanager
+def shared_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple[str, bool]]:
+    """Yield (API URL, started_now) of the Prefect server shared by the runs of ``home``.
+
+    PREFECT_API_URL wins when it answers. Otherwise the server that an earlier run of this
+    home left running is reused, or one is started: ``python -m flows.prefect_env HOME`` (a
+    detached supervisor, not marked as this process's, so orphan clean-up leaves it alone)
+    runs ``prefect server start`` and stops it, and itself, once no run has used it for
+    PHYSANIM_PREFECT_IDLE_S seconds or when ``home`` is removed. While the caller runs, a
+    thread renews the lease every few seconds.
+    """
+    existing = os.environ.get("PREFECT_API_URL")
+    if existing and _healthy(existing):
+        yield existing, False
+        return
+    home = Path(home)
+    home.mkdir(parents=True, exist_ok=True)
+    lease = home / _LEASE
+    with (home / _LOCK).open("a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # one starter per home at a time
+        lease.touch()
+        url, started = _running_shared(home), False
+        if url is None:
+            env = {k: v for k, v in os.environ.items() if k != OWNER_ENV}
+            subprocess.Popen(
+                [sys.executable, "-m", "flows.prefect_env", str(home)],
+                env=env, cwd=Path(__file__).resolve().parents[1], start_new_session=True,
+                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            )  # fmt: skip
+            deadline = time.time() + startup_timeout
+            while (url := _running_shared(home)) is None:
+                if time.time() > deadline:
+                    raise RuntimeError(f"prefect server did not start; see {home / 'server.log'}")
+                time.sleep(0.25)
+            started = True
+    done = threading.Event()
+    period = min(5.0, _idle_seconds() / 4)
+
+    def renew() -> None:
+        while not done.wait(period):
+            with contextlib.suppress(OSError):
+                lease.touch()
+
+    keeper = threading.Thread(target=renew, name="prefect-lease", daemon=True)
+    keeper.start()
+    try:
+        yield url, started
+    finally:
+        done.set()
+        keeper.join()
+        with contextlib.suppress(OSError):
+            lease.touch()  # the idle time counts from the end of this run
+
+
+def _idle_seconds() -> float:
+    return float(os.environ.get(IDLE_ENV, "600"))
+
+
+def _supervise(home: Path) -> None:
+    """Run a Prefect server for ``home`` until it is idle (see ``shared_server``)."""
+    idle_s = _idle_seconds()
+    port = _free_port()
+    url = f"http://127.0.0.1:{port}/api"
+    cmd, env = _server_command(home, port)
+    with (home / "server.log").open("w") as log:
+        proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    state = home / _STATE
+    try:
+        while not _healthy(url):
+            if proc.poll() is not None or stop.wait(0.25):
+                return
+        tmp = home / f".{_STATE}.{os.getpid()}"
+        me = os.getpid()
+        tmp.write_text(json.dumps({"pid": me, "started": start_time(me) or 0.0, "url": url}))
+        tmp.replace(state)
+        ready = time.time()
+        while not stop.wait(min(2.0, idle_s / 4)):
+            try:
+                quiet = time.time() - max((home / _LEASE).stat().st_mtime, ready)
+            except OSError:  # home removed: nobody can use this server any more
+                break
+            if quiet > idle_s or proc.poll() is not None:
+                break
+    finally:
+        with contextlib.suppress(OSError, ValueError):
+            if json.loads(state.read_text()).get("pid") == os.getpid():
+                state.unlink()
+        proc.terminate()
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+if __name__ == "__main__":
+    _supervise(Path(sys.argv[1]))

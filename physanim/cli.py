@@ -219,16 +219,17 @@ def _execute(
         with rich_progress(console) as progress:
             execute_plan_locally(dag, cfg, entries, progress, on_result=_log_result, info=info)
         return
-    from flows.prefect_env import configure
+    from flows.prefect_env import configure, shared_server
 
-    configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
-    from flows.pipeline_flow import pipeline_flow
-
+    home = configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
     for e in entries:
         if e.action == "cached":
             _log_result(StageResult(e.stage, e.key, "cached", 0.0, {}))
     try:
-        with rich_progress(console) as progress:
+        with shared_server(home) as (url, _), rich_progress(console) as progress:
+            os.environ["PREFECT_API_URL"] = url  # before Prefect is imported
+            from flows.pipeline_flow import pipeline_flow
+
             named = pipeline_flow.with_options(name=f"physanim-{dag.name}")
             for r in named(dag, cfg, entries, progress):
                 _log_result(r)

@@ -7,7 +7,12 @@ an MP4 at the capture frame rate and matplotlib plots, all in this output's file
 
 from __future__ import annotations
 
+import hashlib
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -26,6 +31,45 @@ class RenderParams(BaseModel):
         0.0, ge=0.0, le=100.0, description="colour-bar top, mm (0: the run's maximum)"
     )
     turntable: bool = Field(False, description="turn the 3D tiles once around over the video")
+
+
+class TileCache:
+    """Rendered tile sequences of uncoloured meshes by the content of their inputs, in
+    ``folder`` (.npy); the ``keep`` most recently used stay."""
+
+    def __init__(self, folder: Path, keep: int = 4) -> None:
+        self.folder, self.keep = folder, keep
+
+    def render(self, **job: Any) -> Any:
+        """``render_sequence(**job)``, or its earlier result for the same inputs."""
+        import numpy as np
+
+        import physanim.render.face as face
+
+        digest = hashlib.sha256(Path(face.__file__).read_bytes())  # the renderer's code too
+        for name in sorted(job):
+            if name != "progress":
+                value = job[name]
+                data = value.tobytes() if isinstance(value, np.ndarray) else repr(value).encode()
+                digest.update(name.encode() + b"=" + data)
+        path = self.folder / f"{digest.hexdigest()[:32]}.npy"
+        if path.exists():
+            try:
+                tiles = np.load(path)
+                path.touch()
+                if job.get("progress") is not None:
+                    job["progress"](len(tiles), len(tiles))
+                return tiles
+            except (OSError, ValueError):
+                path.unlink(missing_ok=True)
+        tiles = face.render_sequence(**job)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.stem}.{os.getpid()}.npy")
+        np.save(tmp, tiles)
+        tmp.replace(path)
+        for old in sorted(self.folder.glob("*.npy"), key=lambda p: p.stat().st_mtime)[: -self.keep]:
+            old.unlink(missing_ok=True)
+        return tiles
 
 
 def compute(ctx: StageContext) -> None:
@@ -68,21 +112,34 @@ def compute(ctx: StageContext) -> None:
 
     azimuth = np.linspace(0.0, 360.0, len(frames), endpoint=False) if params.turntable else None
     t0 = time.perf_counter()
-    tiles = {
-        "CANDIDE-style fit": render_sequence(
-            aligned["motion"][...][frames], aligned["triangles"][...], camera=camera, size=size,
-            azimuth_deg=azimuth, progress=ctx.progress("render fit"),
+    jobs = {
+        "CANDIDE-style fit": dict(
+            vertices=aligned["motion"][...][frames], faces=aligned["triangles"][...],
+            progress=ctx.progress("render fit"),
         ),
-        "kinematic scan": render_sequence(
-            aligned["kinematic"].get_orthogonal_selection((frames, slice(None), slice(None))),
-            scan_f, camera=camera, size=size, azimuth_deg=azimuth,
-            progress=ctx.progress("render kinematic"),
+        "kinematic scan": dict(
+            vertices=aligned["kinematic"].get_orthogonal_selection(
+                (frames, slice(None), slice(None))
+            ),
+            faces=scan_f, progress=ctx.progress("render kinematic"),
         ),
-        "FEM": render_sequence(
-            scan_v[None] + disp, scan_f, scalars=magnitude_mm, colour_map=bar,
-            camera=camera, size=size, azimuth_deg=azimuth, progress=ctx.progress("render FEM"),
+        "FEM": dict(
+            vertices=scan_v[None] + disp, faces=scan_f, scalars=magnitude_mm, colour_map=bar,
+            progress=ctx.progress("render FEM"),
         ),
     }  # fmt: skip
+    # the three sequences render at once, each in its own worker process; the fit and
+    # kinematic tiles, which no material edit changes, come from the run's tile cache
+    cache = TileCache(ctx.dataset.run_dir / "cache" / "render-tiles")
+    with ThreadPoolExecutor(len(jobs)) as pool:
+        futures = {
+            name: pool.submit(
+                render_sequence if name == "FEM" else cache.render,
+                **job, camera=camera, size=size, azimuth_deg=azimuth,
+            )
+            for name, job in jobs.items()
+        }  # fmt: skip
+        tiles = {name: f.result() for name, f in futures.items()}
     render_s = time.perf_counter() - t0
     colour = cap["color"].get_orthogonal_selection((frames,))
     uv, conf = tracked["uv"][...][frames], tracked["confidence"][...][frames]
@@ -108,12 +165,20 @@ def compute(ctx: StageContext) -> None:
         images = [captured, *(v[i] for v in tiles.values())]
         frame = panel(images, [f"capture t={t / float(aligned.attrs['fps']):.2f} s", *tiles])
         panels.append(frame)
-        if params.png_frames:
-            import cv2
-
-            cv2.imwrite(str(out / "frames" / f"{t:04d}.png"), frame[..., ::-1])
     fps = float(aligned.attrs["fps"]) / params.every_frames
-    video, codec = write_mp4(panels, out / "panel.mp4", fps)
+
+    def write_pngs() -> None:
+        import cv2
+
+        for t, frame in zip(frames, panels, strict=True):  # fast zlib level: 3x quicker
+            path = str(out / "frames" / f"{t:04d}.png")
+            cv2.imwrite(path, frame[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 1])
+
+    with ThreadPoolExecutor(1) as pool:  # PNGs while FFmpeg encodes the video
+        pngs = pool.submit(write_pngs) if params.png_frames else None
+        video, codec = write_mp4(panels, out / "panel.mp4", fps)
+        if pngs is not None:
+            pngs.result()
 
     time_s = np.asarray(sim["times"][...])
     names = list(ev.attrs["landmark_names"])

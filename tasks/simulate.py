@@ -87,6 +87,7 @@ def compute(ctx: StageContext) -> None:
     (T,) Pa, the jaw's angle (T,) rad / pivot / axis, the driven and spring nodes."""
     import numpy as np
 
+    from physanim.fem.linsolve import blas_in_use
     from physanim.fem.simulate import hot_spot_ratio, simulate
 
     params: SimulateStageParams = ctx.params  # type: ignore[assignment]
@@ -107,6 +108,12 @@ def compute(ctx: StageContext) -> None:
         "frames": len(result.displacements),
         "dt_s": result.dt,
         "substeps_per_frame": result.n_substeps,
+        "stepping": params.stepping,
+        "steps": int(result.frame_substeps.sum()),
+        "check_steps": result.check_steps,
+        "frames_over_tolerance": result.frames_over_tolerance,
+        "blas": blas_in_use(),
+        "solver_threads": sorted({int(t) for t in result.solver_threads[1:]}),
         "drive": params.drive.mode,
         "driving_landmarks": len(drive.landmarks),
         "spring_node_fraction_of_skin": round(len(springs.nodes) / n_skin, 4) if springs else 0,

@@ -16,6 +16,9 @@ from tests.commands import ROOT, physanim
 #: Overlay config for short, coarse face runs (relative to the repository root)
 COARSE = "tests/face_pipeline/coarse.yaml"
 
+# the Prefect servers that the CLI runs of the tests share stop soon after the last one
+os.environ.setdefault("PHYSANIM_PREFECT_IDLE_S", "30")
+
 
 @pytest.fixture
 def toy_config(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:

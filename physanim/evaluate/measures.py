@@ -41,12 +41,19 @@ def driven_free_lag(displacements: NDArray, driven: NDArray, free: NDArray, max_
     return lag_frames(mag[:, driven].mean(axis=1), mag[:, free].mean(axis=1), max_lag)
 
 
-def surface_error(
-    points: NDArray, truth_vertices: NDArray, truth_faces: NDArray, frames: Sequence[int]
-) -> NDArray:
-    """RMS distance (len(frames),) m of points (T, N, 3) to the true surface (T, V, 3) per frame."""
-    out = []
+def surface_errors(
+    point_sets: Sequence[NDArray],
+    truth_vertices: NDArray,
+    truth_faces: NDArray,
+    frames: Sequence[int],
+) -> list[NDArray]:
+    """RMS distance (len(frames),) m of each point set (T, N_i, 3) to the true surface (T, V, 3)
+    per frame; one exact closest-point search per frame serves all the sets."""
+    sizes = np.cumsum([p.shape[1] for p in point_sets])[:-1]
+    out: list[list[float]] = [[] for _ in point_sets]
     for t in frames:
-        d = bind_points(points[t], truth_vertices[t], truth_faces).distance
-        out.append(np.sqrt(np.mean(d**2)))
-    return np.asarray(out)
+        points = np.concatenate([p[t] for p in point_sets])
+        d = bind_points(points, truth_vertices[t], truth_faces).distance
+        for rms, part in zip(out, np.split(d, sizes), strict=True):
+            rms.append(float(np.sqrt(np.mean(part**2))))
+    return [np.asarray(rms) for rms in out]

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
+from functools import cache
 from importlib.util import find_spec
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -20,7 +23,7 @@ def has_cholmod() -> bool:
     return find_spec("sksparse") is not None
 
 
-def _without_subnormals(solve: Solve, n: int) -> Solve:
+def without_subnormals(solve: Solve, n: int) -> Solve:
     """Wrap ``solve`` so that its triangular sweeps never meet subnormal numbers.
 
     A localised right-hand side (a few driven nodes) gives a solution that decays
@@ -40,35 +43,104 @@ def _without_subnormals(solve: Solve, n: int) -> Solve:
     return guarded
 
 
-def _cholmod_ldl(A: sp.csc_matrix) -> ParallelLDL:
-    """CHOLMOD's fill-reducing ordering and simplicial LDL^T of A, solved on all threads."""
+def _require_cholmod() -> None:
     if not has_cholmod():
         raise ModuleNotFoundError(
             "solver 'cholmod' needs scikit-sparse: apt-get install libsuitesparse-dev, then "
             "pip install 'scikit-sparse<0.5' (or choose solver 'superlu')"
         )
-    from sksparse.cholmod import cholesky
 
-    # 'best' tries AMD, METIS and nested dissection and keeps the sparsest factor
-    factor = cholesky(A, mode="simplicial", ordering_method="best")
-    L, D = factor.L_D()
-    return ParallelLDL(L, D.diagonal(), factor.P())
+
+@cache
+def blas_in_use() -> str:
+    """The BLAS library CHOLMOD calls in this process, e.g. 'OpenBLAS' or 'reference BLAS
+    (slow)', with its path; read from the process's memory map once CHOLMOD is loaded."""
+    if not has_cholmod():
+        return "none (no CHOLMOD)"
+    import sksparse.cholmod  # noqa: F401  (maps libcholmod and its BLAS)
+
+    try:
+        with open("/proc/self/maps") as f:
+            paths = {line.split()[-1] for line in f if "/" in line}
+    except OSError:
+        return "unknown (no /proc/self/maps)"
+    names = {os.path.basename(p): p for p in sorted(paths) if "site-packages" not in p}
+    for lib, label in (("libmkl_rt", "MKL"), ("libblis", "BLIS"), ("libopenblas", "OpenBLAS")):
+        hit = [p for n, p in names.items() if n.startswith(lib)]
+        if hit:
+            return f"{label} ({hit[0]})"
+    blas = [p for n, p in names.items() if n.startswith("libblas.so")]
+    if blas and "atlas" in blas[0]:
+        return f"ATLAS ({blas[0]})"
+    if blas:
+        return f"reference BLAS (slow; {blas[0]})"
+    return "unknown"
+
+
+def optimized_blas() -> bool:
+    """True when CHOLMOD runs on an optimised BLAS (its supernodal factorisation is BLAS-3)."""
+    return not blas_in_use().startswith(("reference", "none", "unknown"))
+
+
+class CholmodFactors:
+    """Factorises a series of matrices with one sparsity pattern (a Newmark matrix at
+    several time steps): CHOLMOD's METIS ordering and symbolic analysis once, then per matrix
+    a numeric factorisation, solved by a ``ParallelLDL`` that reuses the first one's tree
+    partition and supernode blocks.
+
+    mode 'supernodal': SPD matrices, LL^T by BLAS-3 supernodes (fast with an optimised BLAS);
+    'simplicial': LDL^T, also for quasi-definite matrices. dtype: precision of the stored
+    factor (float32 halves the bytes each solve reads).
+    """
+
+    def __init__(self, mode: str = "supernodal", dtype: type = np.float64) -> None:
+        _require_cholmod()
+        self.mode, self.dtype = mode, dtype
+        self._symbolic: Any = None
+        self._ldl: ParallelLDL | None = None
+
+    def __call__(self, A: sp.spmatrix) -> ParallelLDL:
+        """Solver of A (n, n), which must have the pattern of the first matrix given."""
+        from sksparse.cholmod import analyze
+
+        A = sp.csc_matrix(A)
+        if self._symbolic is None:
+            try:
+                self._symbolic = analyze(A, mode=self.mode, ordering_method="metis")
+            except Exception:  # a CHOLMOD built without METIS  # noqa: BLE001
+                self._symbolic = analyze(A, mode=self.mode, ordering_method="amd")
+        factor = self._symbolic.cholesky(A)
+        if self.mode == "supernodal":
+            L = factor.L()
+            if self._ldl is None:
+                self._ldl = ParallelLDL.from_cholesky(L, factor.P(), dtype=self.dtype)
+                return self._ldl
+            return self._ldl.refilled_cholesky(L)
+        L, D = factor.L_D()
+        d = D.diagonal()
+        if self._ldl is not None:
+            try:
+                return self._ldl.refilled(L, d)
+            except ValueError:  # the numeric factorisation changed the pattern
+                pass
+        self._ldl = ParallelLDL(L, d, factor.P(), dtype=self.dtype)
+        return self._ldl
 
 
 def factorize(A: sp.spmatrix, solver: str = "auto") -> Solve:
     """Factorise the SPD matrix ``A`` (n, n) and return ``solve(b) -> x`` for b (n,) or (n, k).
 
-    solver: 'cholmod' (CHOLMOD's fill-reducing ordering and LDL^T factor, solved by
-    ``ParallelLDL`` on all threads), 'superlu' (SuperLU with MMD(A^T+A) ordering and symmetric
-    pivoting, right for SPD matrices), 'superlu_colamd' (scipy's default splu, the baseline)
-    or 'auto' (cholmod when installed, else superlu).
+    solver: 'cholmod' (CHOLMOD's METIS ordering and supernodal LL^T factor, solved by
+    ``ParallelLDL`` on all threads; A must be positive definite), 'superlu' (SuperLU with
+    MMD(A^T+A) ordering and symmetric pivoting, right for SPD matrices), 'superlu_colamd'
+    (scipy's default splu, the baseline) or 'auto' (cholmod when installed, else superlu).
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     if solver == "auto":
         solver = "cholmod" if has_cholmod() else "superlu"
     if solver == "cholmod":
-        return _without_subnormals(_cholmod_ldl(sp.csc_matrix(A)), A.shape[0])
+        return without_subnormals(CholmodFactors("supernodal")(A), A.shape[0])
     if solver == "superlu":
         lu = spla.splu(
             sp.csc_matrix(A),
@@ -78,11 +150,15 @@ def factorize(A: sp.spmatrix, solver: str = "auto") -> Solve:
         )
     else:
         lu = spla.splu(sp.csc_matrix(A))
-    return _without_subnormals(lu.solve, A.shape[0])
+    return without_subnormals(lu.solve, A.shape[0])
 
 
 def factorize_split(
-    A_el: sp.spmatrix, G: sp.spmatrix, w: np.ndarray, solver: str = "auto"
+    A_el: sp.spmatrix,
+    G: sp.spmatrix,
+    w: np.ndarray,
+    solver: str = "auto",
+    factors: CholmodFactors | None = None,
 ) -> Solve:
     """Solver for A = A_el + G^T diag(w) G (n, n) without forming the product.
 
@@ -90,17 +166,19 @@ def factorize_split(
     matrix [[A_el, G^T], [G, -diag(1/w)]] by sparse LDL^T (stable for quasi-definite matrices
     under any symmetric ordering): G^T diag(w) G couples two rings of nodes and fills the
     Cholesky factor, the augmented matrix only one ring. Other solvers factorise A directly.
+    ``factors``: a simplicial ``CholmodFactors`` to reuse across calls with one pattern.
     """
     if solver == "auto":
         solver = "cholmod" if has_cholmod() else "superlu"
     if solver != "cholmod":
         return factorize((A_el + G.T @ sp.diags(w) @ G).tocsc(), solver)
     n = A_el.shape[0]
-    factor = _cholmod_ldl(sp.bmat([[A_el, G.T], [G, sp.diags(-1.0 / w)]], format="csc"))
+    augmented = sp.bmat([[A_el, G.T], [G, sp.diags(-1.0 / w)]], format="csc")
+    factor = (factors or CholmodFactors("simplicial"))(augmented)
 
     def solve(b: np.ndarray) -> np.ndarray:
         rhs = np.zeros((factor.n,) + b.shape[1:])
         rhs[:n] = b
         return factor(rhs)[:n]
 
-    return _without_subnormals(solve, n)
+    return without_subnormals(solve, n)

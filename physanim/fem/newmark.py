@@ -10,13 +10,23 @@ acceleration jumps); the u rows are then exactly the equation of motion at t+1.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from numba import njit
 
-from physanim.fem.linsolve import Solve, factorize, factorize_split
+from physanim.fem.linsolve import (
+    CholmodFactors,
+    Solve,
+    factorize,
+    factorize_split,
+    has_cholmod,
+    optimized_blas,
+    without_subnormals,
+)
 from physanim.fem.parallel_spmv import ParallelCSR, SymmetricQuadraticForm
 from physanim.fem.statics import free_dofs
 
@@ -35,11 +45,16 @@ class State:
 
 
 class Newmark:
-    """Average-acceleration Newmark integrator; A_uu is factorised once in the constructor.
+    """Average-acceleration Newmark integrator; A_uu is factorised in the constructor.
 
     K, M, C: (n, n) sparse, N/m, kg, N s/m. dt: step, s. prescribed: (n_c,) DOF indices.
     split: optional (K_el, G, w) with K = K_el + G^T diag(w) G (the 'anp' model), which lets
-    CHOLMOD factorise a sparser augmented matrix (see ``factorize_split``).
+    CHOLMOD factorise a sparser augmented matrix when its BLAS is the slow reference one (see
+    ``factorize_split``); with an optimised BLAS its supernodal LL^T of A_uu is faster.
+    precision: 'float64', or 'mixed' (the factor stored in float32, each solve followed by one
+    step of iterative refinement with the float64 matrix; CHOLMOD only).
+    ``with_dt`` makes integrators at other step sizes that share everything but the factor,
+    whose symbolic analysis they share too.
     """
 
     def __init__(
@@ -51,29 +66,72 @@ class Newmark:
         prescribed: np.ndarray,
         solver: str = "auto",
         split: tuple[sp.spmatrix, sp.spmatrix, np.ndarray] | None = None,
+        precision: str = "float64",
     ) -> None:
         n = K.shape[0]
-        self.dt = float(dt)
         self.prescribed = np.asarray(prescribed, dtype=np.int64)
         self.free = free_dofs(n, self.prescribed)
         self.K, self.M, self.C = sp.csr_matrix(K), sp.csr_matrix(M), sp.csr_matrix(C)
-        c0, c1 = 4.0 / self.dt**2, 2.0 / self.dt
-        A = (self.K + c0 * self.M + c1 * self.C).tocsr()
-        self.A_uu = A[self.free][:, self.free].tocsc()
-        self.solver = solver
-        if split is None:
-            self.solve: Solve = factorize(self.A_uu, solver)
-        else:
+        self.solver = "cholmod" if solver == "auto" and has_cholmod() else solver
+        if self.solver == "auto":
+            self.solver = "superlu"
+        if precision not in ("float64", "mixed"):
+            raise ValueError(f"precision must be 'float64' or 'mixed', got {precision!r}")
+        if precision == "mixed" and self.solver != "cholmod":
+            raise ValueError("precision 'mixed' needs solver 'cholmod'")
+        self.precision = precision
+        u = self.free
+        sub = lambda X: X[u][:, u]  # noqa: E731
+        # A_uu(dt) = K_uu + (4/dt^2) M_uu + (2/dt) C_uu: values on one pattern, combined per dt
+        self._pattern, self._kmc = _common_pattern(sub(self.K), sub(self.M), sub(self.C))
+        self._split = None
+        if split is not None and self.solver == "cholmod" and not optimized_blas():
             K_el, G, w = split
-            A_el = (K_el + c0 * self.M + c1 * self.C).tocsr()[self.free][:, self.free]
-            self.solve = factorize_split(A_el, sp.csr_matrix(G)[:, self.free], w, solver)
+            self._split = (sub(sp.csr_matrix(K_el)), sp.csr_matrix(G)[:, u], w)
+        self._factors = None
+        if self.solver == "cholmod":
+            dtype = np.float32 if precision == "mixed" else np.float64
+            mode = "supernodal" if self._split is None else "simplicial"
+            self._factors = CholmodFactors(mode, dtype)
         # rhs_u = [M_u: | C_u: | K_uc] @ [x_m; x_c; -d_c] in a single sparse product
-        rows = lambda X: X[self.free]  # noqa: E731
+        rows = lambda X: X[u]  # noqa: E731
         self._H = ParallelCSR(
             sp.hstack([rows(self.M), rows(self.C), rows(self.K)[:, self.prescribed]])
         )
         self._x = np.zeros(self._H.shape[1])
         self._dissipation_form = SymmetricQuadraticForm(self.C)
+        self.delta_a_max = 0.0
+        self._set_dt(dt)
+
+    def _set_dt(self, dt: float) -> None:
+        self.dt = float(dt)
+        c0, c1 = 4.0 / self.dt**2, 2.0 / self.dt
+        k, m, c = self._kmc
+        self.A_uu = self._pattern.copy()
+        self.A_uu.data = k + c0 * m + c1 * c
+        if self._split is not None:
+            K_el, G, w = self._split
+            A_el = K_el + c0 * self._pattern_part(1) + c1 * self._pattern_part(2)
+            self.solve: Solve = factorize_split(A_el, G, w, self.solver, self._factors)
+        elif self._factors is not None:
+            solve = self._factors(self.A_uu)
+            if self.precision == "mixed":
+                solve = _refined(solve, ParallelCSR(self.A_uu))
+            self.solve = without_subnormals(solve, self.A_uu.shape[0])
+        else:
+            self.solve = factorize(self.A_uu, self.solver)
+
+    def _pattern_part(self, i: int) -> sp.csc_matrix:
+        out = self._pattern.copy()
+        out.data = self._kmc[i].copy()
+        return out
+
+    def with_dt(self, dt: float) -> Newmark:
+        """This integrator at step ``dt`` (s): shares the matrices, products and symbolic
+        analysis; only the numeric factorisation is new."""
+        out = copy.copy(self)
+        out._set_dt(dt)
+        return out
 
     def initial_acceleration(self, state: State, f: np.ndarray | None = None) -> np.ndarray:
         """Free-DOF accelerations from M a = f - K d - C v (prescribed ones kept); in place."""
@@ -84,7 +142,7 @@ class Newmark:
         )
         if f is not None:
             r += f
-        state.a[u] = factorize(self.M[u][:, u], self.solver)(r[u])
+        state.a[u] = _solve_mass(self._pattern_part(1), r[u])
         return state.a
 
     def dissipation(self, delta: np.ndarray) -> float:
@@ -108,7 +166,7 @@ class Newmark:
         rhs = self._H @ x
         if f_u is not None:
             rhs += f_u
-        _advance(state.d, state.v, state.a, self.free, self.solve(rhs), dt)
+        self.delta_a_max = _advance(state.d, state.v, state.a, self.free, self.solve(rhs), dt)
         state.d[self.prescribed], state.v[self.prescribed] = d_c, v_c
         state.a[self.prescribed] = a_c
         return state
@@ -131,10 +189,45 @@ def _pack_rhs(d, v, a, u, c, d_c, v_c, a_c, dt, x):
 
 @njit(cache=True)
 def _advance(d, v, a, u, d_u, dt):
-    """Newmark update of the free DOFs u given their new displacements d_u."""
+    """Newmark update of the free DOFs u given their new displacements d_u; returns the
+    largest change of a free DOF's acceleration over the step."""
+    change = 0.0
     for k in range(u.size):
         i = u[k]
         a_new = (4.0 / dt**2) * (d_u[k] - d[i]) - (4.0 / dt) * v[i] - a[i]
         v[i] += 0.5 * dt * (a[i] + a_new)
+        change = max(change, abs(a_new - a[i]))
         a[i] = a_new
         d[i] = d_u[k]
+    return change
+
+
+def _common_pattern(*mats: sp.spmatrix) -> tuple[sp.csc_matrix, list[np.ndarray]]:
+    """The union sparsity pattern (CSC, sorted) of square matrices and each one's values on
+    it, so that linear combinations of them are sums of value arrays."""
+    pattern = sp.csc_matrix(sum(abs(sp.csc_matrix(X)) for X in mats))
+    pattern.sort_indices()
+    cols = np.repeat(np.arange(pattern.shape[1]), np.diff(pattern.indptr))
+    values = [np.asarray(sp.csr_matrix(X)[pattern.indices, cols]).ravel() for X in mats]
+    return pattern, values
+
+
+def _refined(solve: Solve, A: ParallelCSR) -> Solve:
+    """One step of iterative refinement: x = S b, then x + S (b - A x) (S an approximate
+    solve, e.g. with a float32 factor; the residual in float64)."""
+
+    def refined(b: np.ndarray) -> np.ndarray:
+        x = solve(b)
+        return x + solve(b - A @ x)
+
+    return refined
+
+
+def _solve_mass(M: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
+    """M^-1 b for a mass matrix (SPD, condition number O(10) after diagonal scaling) by
+    Jacobi-preconditioned conjugate gradients to round-off, instead of a factorisation."""
+    inv_diag = 1.0 / M.diagonal()
+    pre = spla.LinearOperator(M.shape, matvec=lambda r: inv_diag * r, dtype=np.float64)
+    op = spla.LinearOperator(M.shape, matvec=ParallelCSR(M).__matmul__, dtype=np.float64)
+    x, info = spla.cg(op, b, rtol=1e-13, atol=0.0, maxiter=500, M=pre)
+    return x if info == 0 else factorize(M)(b)

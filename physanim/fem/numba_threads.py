@@ -5,6 +5,31 @@ on every first parallel launch before falling back. OpenMP first, then TBB, then
 workqueue (which is not safe for concurrent launches from several Python threads).
 """
 
+import time
+from collections.abc import Callable
+
 import numba
+import numpy as np
 
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+
+
+def faster_thread_count(work: Callable[[], object], most: int, repeats: int = 3) -> int:
+    """``most`` or 1: the numba thread count that runs ``work`` faster now (medians of
+    ``repeats`` runs each). On cores busy with other processes a parallel kernel waits at
+    every barrier for a descheduled thread: measured 3x slower solves on two shared cores
+    with two threads than with one."""
+    if most <= 1:
+        return 1
+    medians = {}
+    for n in (most, 1):
+        numba.set_num_threads(n)
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            work()
+            times.append(time.perf_counter() - t0)
+        medians[n] = float(np.median(times))
+    best = min(medians, key=medians.__getitem__)
+    numba.set_num_threads(best)
+    return best

@@ -17,6 +17,7 @@ permutation; ``perm[i]`` is the original index of permuted row i.
 
 from __future__ import annotations
 
+import copy
 import heapq
 
 import numba
@@ -150,6 +151,25 @@ def _pack_blocks(indptr, indices, data, starts, widths, roff, boff, toff, rows, 
                 vals[boff[s] + b * m + r] = data[q + r]
 
 
+@njit(cache=True)
+def _pack_cholesky(indptr, data, starts, widths, roff, boff, toff, vals, tri, dinv):
+    """``_pack_blocks`` from the factor of A = L L^T (CSC, diagonal first in each column) with
+    its columns divided by their diagonal entries: the unit L of A = L' D L'^T, D = diag(L)^2;
+    dinv = 1 / diag(L)^2."""
+    for s in range(starts.size):
+        c0, w = starts[s], widths[s]
+        m = roff[s + 1] - roff[s]
+        for b in range(w):
+            p = indptr[c0 + b]
+            inv = 1.0 / data[p]
+            dinv[c0 + b] = inv * inv
+            for a in range(b + 1, w):
+                tri[toff[s] + b * w + a] = data[p + a - b] * inv
+            q = p + 1 + (w - 1 - b)
+            for r in range(m):
+                vals[boff[s] + b * m + r] = data[q + r] * inv
+
+
 # The sweeps index with unsigned integers (all offsets are uint64): a signed index makes numba
 # emit a negative-index wraparound select on every load, which kept LLVM from vectorising the
 # block loops (measured 1.6x slower block products).
@@ -266,6 +286,18 @@ def _solve(b, perm, dinv, starts, widths, roff, rows, boff, vals, toff, tri, n_o
         out[perm[i]] = x[i]
 
 
+def _strict_lower(L: sp.spmatrix) -> sp.csc_matrix:
+    """The entries of L below the diagonal (explicit zeros kept), CSC with sorted indices."""
+    L = sp.csc_matrix(L)
+    if not L.has_sorted_indices:
+        L = L.copy()
+        L.sort_indices()
+    cols = np.repeat(np.arange(L.shape[1]), np.diff(L.indptr))
+    keep = L.indices > cols
+    indptr = np.r_[0, np.cumsum(np.bincount(cols[keep], minlength=L.shape[1]))]
+    return sp.csc_matrix((L.data[keep], L.indices[keep], indptr), shape=L.shape)
+
+
 def _elimination_tree(Ls: sp.csc_matrix) -> np.ndarray:
     """parent[j] = first row below the diagonal in column j of L (sorted CSC), -1 for roots."""
     cnt = np.diff(Ls.indptr)
@@ -279,21 +311,29 @@ class ParallelLDL:
 
     L: (n, n) sparse unit lower triangular (diagonal stored or not); d: (n,) diagonal of D;
     perm: (n,) with (P b)[i] = b[perm[i]]. n_threads defaults to numba's thread count.
-    Not re-entrant: one solve at a time per instance (it reuses its work arrays).
+    dtype: float64, or float32 to store L's entries in single precision (half the bytes the
+    memory-bound sweeps read; the sweeps still accumulate in float64).
+    Not re-entrant: one solve at a time per instance (it reuses its work arrays; instances
+    made by ``refilled`` share them with their source).
     """
 
     def __init__(
-        self, L: sp.spmatrix, d: np.ndarray, perm: np.ndarray, n_threads: int | None = None
+        self,
+        L: sp.spmatrix,
+        d: np.ndarray,
+        perm: np.ndarray,
+        n_threads: int | None = None,
+        dtype: type = np.float64,
     ) -> None:
-        Ls = sp.csc_matrix(sp.tril(L, -1, format="csc"))
-        Ls.sort_indices()
+        Ls = _strict_lower(L)
         perm = np.asarray(perm, dtype=np.int64)
         d = np.asarray(d, dtype=np.float64)
         parent = _elimination_tree(Ls)
         size = _subtree_sizes(parent)
+        self._q = None
         if not np.array_equal(_first_descendants(parent), np.arange(parent.size) - size + 1):
             # a postorder keeps L lower triangular (ancestors stay after descendants)
-            q = _postorder(parent)
+            self._q = q = _postorder(parent)
             Ls = sp.csc_matrix(Ls[q][:, q])
             Ls.sort_indices()
             perm, d = perm[q], d[q]
@@ -303,7 +343,11 @@ class ParallelLDL:
         self.n = n
         self.perm = perm
         self.dinv = 1.0 / d
+        self.dtype = np.dtype(dtype)
         indptr, indices = Ls.indptr.astype(np.int64), Ls.indices.astype(np.int64)
+        self._pattern = (
+            (L.indptr.copy(), L.indices.copy()) if sp.issparse(L) and L.format == "csc" else None
+        )
         cnt = np.diff(indptr)
         n_bins = max(1, int(n_threads or numba.get_num_threads()))
         is_top, bin_roots = _partition(parent, cnt + 1, n_bins)
@@ -327,6 +371,8 @@ class ParallelLDL:
         self.tri = np.zeros(toff[-1])
         _pack_blocks(indptr, indices, Ls.data, starts, widths, roff, boff, toff, self.rows,
                      self.vals, self.tri)  # fmt: skip
+        self._packing = (indptr, indices, starts, widths, roff, boff, toff)
+        self.vals, self.tri = self.vals.astype(self.dtype), self.tri.astype(self.dtype)
         u64 = lambda a: np.asarray(a, np.uint64)  # noqa: E731
         self.starts, self.widths = u64(starts), u64(widths)
         self.roff, self.boff, self.toff = u64(roff), u64(boff), u64(toff)
@@ -350,6 +396,80 @@ class ParallelLDL:
         self.buf = np.zeros((n_bins, n))
         self.tmp = np.zeros((n_bins, int(m.max(initial=0))))
         self._y, self._x = np.empty(n), np.empty(n)
+
+    @classmethod
+    def from_cholesky(
+        cls,
+        L: sp.csc_matrix,
+        perm: np.ndarray,
+        n_threads: int | None = None,
+        dtype: type = np.float64,
+    ) -> ParallelLDL:
+        """Solver of A = P^T L L^T P from a Cholesky factor L (CSC, lower, diagonal first in
+        each column, as CHOLMOD gives it); ``refilled_cholesky`` reuses it for other factors
+        with L's pattern."""
+        L = sp.csc_matrix(L)
+        diag = L.data[L.indptr[:-1]]
+        unit = L.copy()
+        unit.data /= np.repeat(diag, np.diff(L.indptr))
+        out = cls(unit, diag**2, perm, n_threads, dtype)
+        out._cholesky_pattern = (L.indptr.copy(), L.indices.copy())
+        return out
+
+    def refilled_cholesky(self, L: sp.csc_matrix) -> ParallelLDL:
+        """``refilled`` for a Cholesky factor with the pattern of the one this solver was made
+        from by ``from_cholesky``: one compiled pass packs the blocks."""
+        pattern = getattr(self, "_cholesky_pattern", None)
+        if (
+            pattern is None
+            or self._q is not None
+            or not np.array_equal(L.indptr, pattern[0])
+            or not np.array_equal(L.indices, pattern[1])
+        ):
+            diag = L.diagonal()
+            unit = sp.csc_matrix(L, copy=True)
+            unit.data /= np.repeat(diag, np.diff(unit.indptr))
+            return self.refilled(unit, diag**2)
+        _, _, starts, widths, roff, boff, toff = self._packing
+        out = copy.copy(self)
+        out.vals, out.tri = (
+            np.zeros(self.vals.size, self.dtype),
+            np.zeros(self.tri.size, self.dtype),
+        )
+        out.dinv = np.empty(self.n)
+        _pack_cholesky(
+            L.indptr.astype(np.int64), L.data, starts, widths, roff, boff, toff, out.vals,
+            out.tri, out.dinv,
+        )  # fmt: skip
+        return out
+
+    def refilled(self, L: sp.csc_matrix, d: np.ndarray) -> ParallelLDL:
+        """The solver of another factor with the same CSC pattern as this one's ``L`` (a
+        numeric refactorisation after the same symbolic analysis and ordering): the elimination
+        tree, its partition and the supernode blocks are reused, only the values are packed."""
+        if (
+            self._pattern is None
+            or not (sp.issparse(L) and L.format == "csc")
+            or not np.array_equal(L.indptr, self._pattern[0])
+            or not np.array_equal(L.indices, self._pattern[1])
+        ):
+            raise ValueError("refilled: L must have the CSC pattern of the original factor")
+        Ls = _strict_lower(L)
+        d = np.asarray(d, dtype=np.float64)
+        if self._q is not None:
+            Ls = sp.csc_matrix(Ls[self._q][:, self._q])
+            Ls.sort_indices()
+            d = d[self._q]
+        indptr, indices, starts, widths, roff, boff, toff = self._packing
+        if not np.array_equal(Ls.indptr, indptr):
+            raise ValueError("refilled: L must have the CSC pattern of the original factor")
+        out = copy.copy(self)
+        out.dinv = 1.0 / d
+        vals, tri = np.zeros(self.vals.size), np.zeros(self.tri.size)
+        rows = np.zeros(self.rows.size, np.uint32)
+        _pack_blocks(indptr, indices, Ls.data, starts, widths, roff, boff, toff, rows, vals, tri)
+        out.vals, out.tri = vals.astype(self.dtype), tri.astype(self.dtype)
+        return out
 
     def __call__(self, b: np.ndarray) -> np.ndarray:
         """x (n,) or (n, k) for b of the same shape."""

@@ -5,6 +5,8 @@ import pytest
 import scipy.linalg as sla
 from fem_meshes import box_mesh
 
+import physanim.fem.newmark as newmark_module
+from physanim.fem.linsolve import has_cholmod
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.newmark import Newmark, State
@@ -100,11 +102,19 @@ def test_mesh_dynamics_second_order_against_exact_solution():
     assert 3.5 < errs[0] / errs[1] < 4.5
 
 
+@pytest.mark.parametrize("slow_blas", [False, True])
 @pytest.mark.parametrize("solver", ["auto", "superlu", "superlu_colamd"])
-def test_split_anp_solver_matches_direct_solve(solver):
+def test_split_anp_solver_matches_direct_solve(solver, slow_blas, monkeypatch):
+    # with the reference BLAS, CHOLMOD factorises the sparser augmented matrix instead
+    monkeypatch.setattr(newmark_module, "optimized_blas", lambda: not slow_blas)
     model, fixed, d0 = _cantilever(eta=2.0)
     direct = Newmark(model.K, model.M, model.C, 1e-4, fixed, "superlu")
     split = Newmark(model.K, model.M, model.C, 1e-4, fixed, solver, model.split)
     b = np.random.default_rng(3).normal(size=len(direct.free))
     x_ref = direct.solve(b)
     np.testing.assert_allclose(split.solve(b), x_ref, rtol=0, atol=1e-10 * np.abs(x_ref).max())
+    other = split.with_dt(3e-4)  # a cached step size: same symbolic analysis, new factor
+    ref = Newmark(model.K, model.M, model.C, 3e-4, fixed, "superlu").solve(b)
+    np.testing.assert_allclose(other.solve(b), ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+    if solver == "auto" and has_cholmod():
+        assert (split._split is not None) == slow_blas

@@ -36,7 +36,9 @@ def test_driven_nodes_follow_and_fixed_nodes_stay():
     n_frames = 16
     traj = np.zeros((n_frames, len(driven), 3))
     traj[:, :, 2] = 2e-3 * np.sin(np.linspace(0, np.pi, n_frames))[:, None]
-    res = simulate(nodes, tets, TetMaterials.uniform(len(tets)), driven, traj, 1 / 30, fixed)
+    fixed_steps = SimulateParams(stepping="fixed")
+    mat = TetMaterials.uniform(len(tets))
+    res = simulate(nodes, tets, mat, driven, traj, 1 / 30, fixed, fixed_steps)
     assert res.displacements.shape == (n_frames, len(nodes), 3)
     assert res.displacements.dtype == np.float32
     np.testing.assert_allclose(res.displacements[:, driven], traj, atol=1e-9)
@@ -45,6 +47,33 @@ def test_driven_nodes_follow_and_fixed_nodes_stay():
     assert (np.diff(res.dissipated) >= 0).all() and res.dissipated[-1] > 0
     assert res.strain.max() > 0 and res.max_von_mises.max() > 0
     assert res.inverted_count.max() == 0
+    assert (res.frame_substeps[1:] == 34).all() and res.check_steps == 0
+
+
+@pytest.mark.parametrize("precision", ["float64", "mixed"])
+def test_adaptive_steps_match_the_fine_fixed_reference(precision):
+    # a fast jerk (1 mm in two frames) then a hold: the control refines the jerk only
+    nodes, tets, fixed, driven = _slab()
+    mat = TetMaterials.uniform(len(tets))
+    n_frames = 12
+    pulse = np.r_[0, 0, 0.5, 1, 1, 1, 1, 1, 1, 1, 1, 1]
+    traj = np.zeros((n_frames, len(driven), 3))
+    traj[:, :, 2] = 1e-3 * pulse[:, None]
+    ref = simulate(
+        nodes, tets, mat, driven, traj, 1 / 30, fixed, SimulateParams(dt=2.5e-4, stepping="fixed")
+    )
+    tol_mm = 1e-3
+    params = SimulateParams(dt=2.5e-4, error_tol_mm=tol_mm, precision=precision)
+    res = simulate(nodes, tets, mat, driven, traj, 1 / 30, fixed, params)
+    err = np.abs(res.displacements - ref.displacements).max()
+    assert err < 0.01 * np.abs(ref.displacements).max()  # within 1 % of the peak
+    assert err < 5 * tol_mm * 1e-3
+    steps = res.frame_substeps[1:]
+    assert steps.sum() < 0.5 * ref.frame_substeps.sum()  # far fewer steps
+    assert steps[1:4].max() > steps[-3:].min()  # finer through the jerk than in the hold
+    assert res.frames_over_tolerance == 0 and res.check_steps > 0
+    assert set(steps) <= {2, 4, 8, 16, 32, 64, 128, 134}  # pairs of 1, 2, 4, ... and the max
+    np.testing.assert_allclose(res.dissipated[-1], ref.dissipated[-1], rtol=0.02)
 
 
 def test_slow_driving_reaches_static_equilibrium():
@@ -72,7 +101,9 @@ def test_corotational_matches_linear_for_small_motion_and_removes_rotation_artef
     mat = TetMaterials.uniform(len(tets))
     traj = np.zeros((6, len(driven), 3))
     traj[:, :, 2] = 1e-5 * np.linspace(0, 1, 6)[:, None]
-    lin = simulate(nodes, tets, mat, driven, traj, 0.02, fixed, SimulateParams(dt=5e-3))
+    # the linear run on the reference path: corotational runs always take fixed steps
+    fixed_steps = SimulateParams(dt=5e-3, stepping="fixed")
+    lin = simulate(nodes, tets, mat, driven, traj, 0.02, fixed, fixed_steps)
     cor = simulate(
         nodes, tets, mat, driven, traj, 0.02, fixed, SimulateParams(dt=5e-3, corotational=True)
     )
@@ -96,7 +127,7 @@ def test_corotational_matches_linear_for_small_motion_and_removes_rotation_artef
             rigid,
             0.02,
             None,
-            SimulateParams(dt=5e-3, corotational=corot),
+            SimulateParams(dt=5e-3, corotational=corot, stepping="fixed"),
         )
     assert out[False].strain[-1] > 1e3 * max(out[True].strain[-1], 1e-12)
     assert out[True].max_von_mises[-1] < 1e-2 * out[False].max_von_mises[-1]

@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from physanim.fem.linsolve import factorize, factorize_split, has_cholmod
+from physanim.fem.linsolve import CholmodFactors, factorize, factorize_split, has_cholmod
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.parallel_ldl import ParallelLDL
@@ -82,6 +82,31 @@ def test_split_and_direct_cholmod_solvers_match_superlu():
     ref = factorize(A, "superlu")(b)
     for x in (factorize(A, "cholmod")(b), factorize_split(A_el, G, w, "cholmod")(b)):
         np.testing.assert_allclose(x, ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+
+
+@needs_cholmod
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_refactorised_pattern_reuses_the_solver_structure(dtype):
+    # Newmark matrices at three step sizes: one symbolic analysis, refilled solvers
+    model, free, A_el, G = _tet_model()
+    w = model.split[2]
+    K = (A_el + G.T @ sp.diags(w) @ G).tocsc()
+    M = sp.csr_matrix(model.M)[free][:, free]
+    factors = CholmodFactors("supernodal", dtype)
+    b = np.random.default_rng(4).normal(size=K.shape[0])
+    tol = 1e-10 if dtype == np.float64 else 1e-5
+    solvers = []
+    for c0 in (1e4, 1e6, 1e8):
+        A = (K + c0 * M).tocsc()
+        solve = factors(A)
+        solvers.append(solve)
+        ref = spla.spsolve(A, b)
+        np.testing.assert_allclose(solve(b), ref, rtol=0, atol=tol * np.abs(ref).max())
+    assert solvers[2].rows is solvers[0].rows  # structure shared, values not
+    assert solvers[2].vals is not solvers[0].vals and solvers[0].vals.dtype == dtype
+    # the first solver still solves its own matrix after the others were made
+    ref = spla.spsolve((K + 1e4 * M).tocsc(), b)
+    np.testing.assert_allclose(solvers[0](b), ref, rtol=0, atol=tol * np.abs(ref).max())
 
 
 @pytest.mark.parametrize("n_threads", [1, 2, 5])

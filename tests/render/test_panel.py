@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
+import physanim.render.panel as panel_module
 from physanim.render.panel import TITLE_HEIGHT, draw_landmarks, panel, write_mp4
 
 
@@ -71,6 +72,20 @@ def test_write_mp4_errors(tmp_path):
     frames = [np.zeros((8, 8, 3), np.uint8), np.zeros((8, 10, 3), np.uint8)]
     with pytest.raises(ValueError, match="frame 1 has shape"):
         write_mp4(frames, tmp_path / "v.mp4", 30.0)
+    assert not list(tmp_path.iterdir())  # nothing half-written
+
+
+def test_write_mp4_without_ffmpeg_falls_back_to_opencv(tmp_path, monkeypatch):
+    # imageio-ffmpeg's FFmpeg (VP9 in realtime mode) is the fast path; OpenCV's VP9 remains
+    monkeypatch.setattr(panel_module, "_ffmpeg_vp9", lambda *a: False)
+    frames = [np.full((48, 64, 3), (10 * i, 100, 200 - 10 * i), np.uint8) for i in range(4)]
+    path, codec = write_mp4(frames, tmp_path / "v.mp4", fps=30.0)
+    assert codec == "vp09"
+    monkeypatch.undo()
+    _, codec = write_mp4(frames, tmp_path / "w.mp4", fps=30.0, ffmpeg=False)  # by choice
+    assert codec == "vp09" and (tmp_path / "w.mp4").stat().st_size > 0
+    cap = cv2.VideoCapture(str(path))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 4
 
 
 def test_write_webm_vp8(tmp_path):

@@ -1,0 +1,37 @@
+"""One Prefect server per PREFECT_HOME shared by consecutive runs, stopped when idle."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+from flows.prefect_env import IDLE_ENV, shared_server
+from physanim.processes import OWNER_ENV, _orphans, mark_children, process_alive
+
+
+def test_runs_share_one_server_that_stops_when_idle(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    home = tmp_path / "prefect"
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    monkeypatch.setenv(IDLE_ENV, "4")
+    mark_children()  # as the CLI does: the server must not count as this process's child
+    with shared_server(home) as (url, started):
+        assert started
+        pid = json.loads((home / "server.json").read_text())["pid"]
+        assert OWNER_ENV not in Path(f"/proc/{pid}/environ").read_text()
+        time.sleep(6)  # longer than the idle time: the open run's lease keeps it alive
+        with shared_server(home) as (again, started_again):
+            assert (again, started_again) == (url, False)  # reused, not restarted
+    assert pid not in [p for p, _, _ in _orphans()]  # orphan clean-up leaves it alone
+    deadline = time.time() + 60
+    while process_alive(pid) and time.time() < deadline:
+        time.sleep(0.5)
+    assert not process_alive(pid)  # stopped after the idle time
+    assert not (home / "server.json").exists()
+    assert (home / "prefect.db").exists()  # the run history stays
+    os.environ.pop(OWNER_ENV, None)
