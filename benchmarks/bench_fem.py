@@ -33,7 +33,7 @@ from physanim.fem.simulate import simulate
 from physanim.pipeline import execute_plan_locally, make_plan
 from physanim.pipeline.progress import rich_progress
 from physanim.pipeline.spec import dataset_overrides
-from physanim.store import StageStore
+from physanim.store import StageStore, read_dataclass
 from tasks.simulate import SimulateStageParams, simulate_inputs
 
 
@@ -50,8 +50,11 @@ def demo_inputs() -> tuple[dict[str, Any], SimulateStageParams]:
             print("computing the demo's " + ", ".join(e.stage for e in plan if e.action == "run"))
         execute_plan_locally(FACE, config, plan, progress)
     key = {e.stage: e.key for e in plan}
-    groups = (store.open(s, key[s]) for s in ("track", "align", "tetra", "materials"))
-    args, _ = simulate_inputs(*groups, config.simulate)  # type: ignore[attr-defined]
+    outputs = [
+        read_dataclass(FACE.stage(s).output, store.open(s, key[s]))  # type: ignore[arg-type]
+        for s in ("track", "align", "tetra", "materials")
+    ]
+    args, _ = simulate_inputs(*outputs, config.simulate)  # type: ignore[attr-defined]
     return args, config.simulate  # type: ignore[attr-defined]
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from pydantic import BaseModel
 
 from physanim.capture.params import DemoParams
-from physanim.pipeline import Pipeline, PlanEntry
+from physanim.pipeline import DatasetParams, Pipeline, PlanEntry
 from physanim.store import StageStore
 from physanim.store.stage_store import LATEST
 from tasks import (
@@ -46,7 +46,7 @@ def face_report(store: StageStore, entries: list[PlanEntry], config: BaseModel) 
     """
     from physanim.render.run_report import write_run_report
 
-    dataset = config.dataset  # type: ignore[attr-defined]
+    dataset: DatasetParams = config.dataset  # type: ignore[attr-defined]
     out = dataset.run_dir / "report"
     index, pointer = out / "index.html", store.root / LATEST
     fresh = index.exists() and (
@@ -54,7 +54,7 @@ def face_report(store: StageStore, entries: list[PlanEntry], config: BaseModel) 
     )
     if fresh and not any(e.action == "run" for e in entries):
         return index
-    return write_run_report(store, entries, out, f"physanim: {dataset.name}")
+    return write_run_report(FACE, store, entries, out, f"physanim: {dataset.name}")
 
 
 FACE = Pipeline(

@@ -1,21 +1,30 @@
 """Stage ``align``: prepare the high-res scan, align the motion mesh to it, bind, animate.
 
-Outputs the prepared scan (vertices (N,3) m, faces; border slits zipped shut; cut along the
-lip seam so the lips can part: ``scan_side`` (N,) says which lip a vertex belongs to and
-``scan_parent`` (N,) which uncut vertex it copies), the mouth line (P,3) m, the motion mesh in
-the scan frame (T,V,3), the binding of every scan vertex (triangle, barycentric weights,
-distance; never across the seam) and the kinematic shape-motion model: scan vertex positions
-per frame (T,N,3) float32.
+Outputs the prepared scan (border slits zipped shut, cut along the lip seam so the lips can
+part), the mouth line, the motion mesh in the scan frame, the binding of every scan vertex
+(never across the seam) and the kinematic shape-motion model (:class:`AlignOutput`).
+
+Version 3: ``fps`` is no longer copied into this output (read it from ``track``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+import numpy as np
 from pydantic import ConfigDict, Field
 
+from physanim.mesh.binding import Binding
 from physanim.mesh.params import AlignParams
-from physanim.pipeline import StageContext, StageSpec
+from physanim.pipeline import DatasetParams, StageContext, StageSpec
+from tasks.fit import FitOutput
+from tasks.track import TrackOutput
+
+if TYPE_CHECKING:
+    from physanim.mesh.seam import MouthLine
 
 
 class AlignStageParams(AlignParams):
@@ -29,9 +38,61 @@ class AlignStageParams(AlignParams):
     scan_units: str = Field("mm", pattern="^(mm|cm|m)$", description="units of the scan file")
 
 
-def compute(ctx: StageContext) -> None:
-    import numpy as np
+@dataclass(frozen=True)
+class AlignOutput:
+    """The scan, bound to the motion mesh and animated by it (T frames, N scan vertices).
 
+    ``scan_vertices`` (N, 3) m, ``scan_faces`` (F, 3), cut along the lip seam: ``scan_side``
+    (N,) which lip a vertex belongs to, ``scan_parent`` (N,) which uncut vertex it copies
+    (the uncut vertices come first); ``mouth_line`` (P, 3) m and ``lip_band_m`` m, the lip
+    seam; ``motion`` (T, V, 3) float32 m, the motion mesh in the scan frame, ``triangles``
+    (F_m, 3); ``landmarks`` (L, 3) m the feature points on the scan, ``landmark_names`` (L),
+    ``landmark_vertices`` (L,) their motion-mesh vertices; ``binding`` of every scan vertex;
+    ``kinematic`` (T, N, 3) float32 m, the kinematic scan (read lazily: a Zarr array).
+    """
+
+    scan_vertices: np.ndarray
+    scan_faces: np.ndarray
+    scan_side: np.ndarray
+    scan_parent: np.ndarray
+    mouth_line: np.ndarray
+    motion: np.ndarray
+    triangles: np.ndarray
+    landmark_vertices: np.ndarray
+    landmarks: np.ndarray
+    binding: Binding
+    kinematic: np.ndarray = field(metadata={"lazy": True})
+    landmark_names: list[str] = field(default_factory=list)
+    lip_band_m: float = 0.0
+
+    def mouth(self) -> MouthLine:
+        """The lip seam as a :class:`~physanim.mesh.seam.MouthLine`."""
+        from physanim.mesh.seam import MouthLine
+
+        return MouthLine(self.mouth_line, float(self.lip_band_m))
+
+    def landmark_positions(self) -> dict[str, np.ndarray]:
+        """Feature point name -> (3,) m position on the scan."""
+        return dict(zip(self.landmark_names, self.landmarks, strict=True))
+
+
+def fingerprint(dataset: DatasetParams, params: AlignStageParams) -> Mapping[str, object]:
+    """Size and modification time of the scan file (an edited scan re-runs align)."""
+    from physanim.store import files_fingerprint
+
+    path = Path(params.scan)
+    if params.scan == "face000" or not path.is_file():
+        return {"scan": params.scan}  # the packaged scan, or a missing file align reports
+    return {"scan": files_fingerprint([path], path.parent)}
+
+
+def compute(
+    params: AlignStageParams,
+    track: TrackOutput,
+    fit: FitOutput,
+    ctx: StageContext[AlignStageParams],
+) -> AlignOutput:
+    """Scan prep, alignment of the motion mesh to the scan, lip seam, binding, kinematic scan."""
     from physanim.face.landmarks import FEATURE_POINTS
     from physanim.face.model import mouth_line_points
     from physanim.mesh.align import align_motion_mesh
@@ -39,75 +100,56 @@ def compute(ctx: StageContext) -> None:
     from physanim.mesh.remesh import prepare_scan
     from physanim.mesh.scan_io import clean_scan, load_scan
     from physanim.mesh.seam import MouthLine, bind_across_seam, cut_surface
+    from physanim.names import name_index
 
-    params: AlignStageParams = ctx.params  # type: ignore[assignment]
     if params.scan == "face000":
         from physanim.capture.actor import build_actor
 
         actor = build_actor()
         raw_v, raw_f = actor.vertices, actor.faces
     else:
-        path = Path(params.scan)
-        raw_v, raw_f = clean_scan(*load_scan(path, params.scan_units))  # type: ignore[arg-type]
+        raw_v, raw_f = clean_scan(*load_scan(Path(params.scan), params.scan_units))
     scan_v, scan_f = prepare_scan(
         raw_v, raw_f, params.remesh_edge_length_m, params.remesh_iterations,
         params.notch_max_gap_m, params.notch_min_depth_m,
     )  # fmt: skip
 
-    tracked, fitted = ctx.input("track"), ctx.input("fit")
-    names = list(tracked.attrs["names"])
-    template = tracked["template"][...]
-    features = [n for n in FEATURE_POINTS if n in names]
-    scan_lms = template[[names.index(n) for n in features]]
-    vertex_names = list(fitted.attrs["vertex_names"])
-    lm_vertices = np.array([vertex_names.index(n) for n in features])
-    triangles = fitted["triangles"][...]
-    motion = fitted["motion"][...]
-
+    features = [n for n in FEATURE_POINTS if n in track.landmark_names]
+    scan_lms = track.template[name_index(track.landmark_names, features)]
+    lm_vertices = name_index(fit.vertex_names, features)
     alignment = align_motion_mesh(
-        motion[0], triangles, lm_vertices, scan_v, scan_f, scan_lms,
+        fit.motion[0], fit.triangles, lm_vertices, scan_v, scan_f, scan_lms,
         features.index("pronasale"), params, ctx.progress("align"),
     )  # fmt: skip
-    aligned = alignment.apply(motion)
+    aligned = alignment.apply(fit.motion)
     # the lip seam: the fitted model's mouth slit, else the line through the mouth corners
-    line = mouth_line_points(aligned[0], vertex_names)
+    line = mouth_line_points(aligned[0], fit.vertex_names)
     if line is None:
-        line = scan_lms[[features.index("ch_R"), features.index("ch_L")]]
+        line = scan_lms[name_index(features, ["ch_R", "ch_L"])]
     mouth = MouthLine(line, params.lip_band_m)
     cut = cut_surface(scan_v, scan_f, mouth)
     scan_v, scan_f = cut.nodes(scan_v), cut.elements
     binding = bind_across_seam(
-        scan_v, cut.side, aligned[0], triangles, mouth, params.binding_candidates
+        scan_v, cut.side, aligned[0], fit.triangles, mouth, params.binding_candidates
     )
-    kinematic = animate_bound_points(scan_v, binding, triangles, aligned)
-
-    ctx.write("scan_vertices", scan_v)
-    ctx.write("scan_faces", scan_f)
-    ctx.write("scan_side", cut.side)
-    ctx.write("scan_parent", cut.parent)
-    ctx.write("mouth_line", mouth.points)
-    ctx.write("motion", aligned.astype(np.float32))
-    ctx.write("triangles", triangles)
-    ctx.write("landmark_vertices", lm_vertices)
-    ctx.write("landmarks", scan_lms)
-    ctx.write_record(binding, prefix="binding")
-    ctx.write("kinematic", kinematic.astype(np.float32))
-    ctx.out.attrs.update(
-        landmark_names=features, fps=float(tracked.attrs["fps"]), lip_band_m=params.lip_band_m
-    )
+    kinematic = animate_bound_points(scan_v, binding, fit.triangles, aligned)
     ctx.summary.update(
         scan_vertices=len(scan_v),
         scan_faces=len(scan_f),
         lip_seam_edges=cut.n_seam_faces,
         median_binding_distance_mm=round(float(np.median(binding.distance)) * 1e3, 3),
     )
+    return AlignOutput(
+        scan_v, scan_f, cut.side, cut.parent, mouth.points, aligned.astype(np.float32),
+        fit.triangles, lm_vertices, scan_lms, binding, kinematic.astype(np.float32),
+        features, params.lip_band_m,
+    )  # fmt: skip
 
 
-SPEC = StageSpec(
-    name="align",
-    upstream=("track", "fit"),
-    params=AlignStageParams,
-    version="2",
-    compute=compute,
+SPEC = StageSpec.typed(
+    "align",
+    compute,
+    version="3",
     doc="scan prep + remesh, motion mesh aligned to the scan, binding, kinematic model",
+    fingerprint=fingerprint,
 )

@@ -1,12 +1,17 @@
-"""Stage ``arm_render``: frames and MP4 of the arm per condition, plus comparison plots."""
+"""Stage ``arm_render``: frames and MP4 of the arm per condition, plus comparison plots.
+
+Version 3: the list of ``videos`` is stored as an attribute of the output.
+"""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from physanim.muscle.params import ArmConditions
 from physanim.pipeline import StageContext, StageSpec
-from physanim.store import read_dataclass
+from tasks.muscles import MusclesOutput
 
 
 class ArmRenderParams(BaseModel):
@@ -17,9 +22,17 @@ class ArmRenderParams(BaseModel):
     size_px: int = Field(480, ge=64, le=4096, description="frame width and height, px")
 
 
-def compute(ctx: StageContext) -> None:
+@dataclass(frozen=True)
+class ArmRenderOutput:
+    """The videos rendered (``<condition>/arm.mp4`` in files/, beside the plots)."""
+
+    videos: list[str]
+
+
+def compute(
+    params: ArmRenderParams, muscles: MusclesOutput, ctx: StageContext[ArmRenderParams]
+) -> ArmRenderOutput:
     """Render every condition of the upstream ``muscles`` output into this output's files/."""
-    from physanim.muscle.arm import ArmResult
     from physanim.render.arm import (
         plot_condition_summary,
         plot_muscle_curves,
@@ -27,13 +40,9 @@ def compute(ctx: StageContext) -> None:
         render_arm_video,
     )
 
-    params: ArmRenderParams = ctx.params  # type: ignore[assignment]
-    conditions: ArmConditions = ArmConditions.model_validate(
-        ctx.store.provenance("muscles", ctx.upstream["muscles"])["params"]
-    )
+    conditions = ctx.upstream_params("muscles", ArmConditions)
     studies = conditions.resolved()
-    solved = ctx.input("muscles")
-    results = {n: read_dataclass(ArmResult, solved[n]) for n in studies}
+    results = {n: muscles.conditions[n] for n in studies}
     out = ctx.files_dir
     base = conditions.base
     for name, study in studies.items():
@@ -51,14 +60,20 @@ def compute(ctx: StageContext) -> None:
     plot_muscle_timeseries(results, base.arm, out / "fibre_length.png", "fibre_length")
     plot_muscle_curves(out / "muscle_curves.png")
     plot_condition_summary(results, [lk.name for lk in base.arm.links], out / "conditions.png")
-    ctx.summary["files"] = sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))
+    videos = sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))
+    ctx.summary["files"] = videos
+    return ArmRenderOutput(videos)
 
 
-SPEC = StageSpec(
-    name="arm_render",
-    upstream=("muscles",),
-    params=ArmRenderParams,
-    version="2",
-    compute=compute,
+SPEC = StageSpec.typed(
+    "arm_render",
+    compute,
+    version="3",
     doc="arm frames + MP4 per condition, activation / fibre-length plots",
+    files={
+        "activation.png": "Muscle activations per condition",
+        "fibre_length.png": "Fibre lengths per condition",
+        "muscle_curves.png": "Hill muscle curves",
+        "conditions.png": "Conditions compared",
+    },
 )

@@ -2,45 +2,64 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
 
+import numpy as np
+
+from physanim.face.fit import Embedding
 from physanim.face.params import FitParams
 from physanim.pipeline import StageContext, StageSpec
-
-if TYPE_CHECKING:
-    import numpy as np
+from tasks.track import TrackOutput
 
 
-def compute(ctx: StageContext) -> None:
+@dataclass(frozen=True)
+class FitOutput:
+    """The face model fitted per frame (``physanim.face.fit.FitResult`` plus the model).
+
+    ``su`` (n_su,); ``au`` (T, n_au); ``pose`` (T, 6) rotvec rad + t m; ``motion`` (T, V, 3)
+    m, the motion mesh in the model frame; ``residual`` (T, K) m; ``rms`` (T,) m;
+    ``embedding`` of the K landmarks on the model; ``triangles`` (F, 3) of the model;
+    ``au_names``, ``su_names``, ``vertex_names`` (V, named model vertices, else ""),
+    ``landmark_names`` (K) the order of ``residual`` and ``embedding``.
+    """
+
+    su: np.ndarray
+    au: np.ndarray
+    pose: np.ndarray
+    motion: np.ndarray
+    residual: np.ndarray
+    rms: np.ndarray
+    embedding: Embedding
+    triangles: np.ndarray
+    au_names: list[str]
+    su_names: list[str]
+    vertex_names: list[str]
+    landmark_names: list[str]
+
+
+def compute(params: FitParams, track: TrackOutput, ctx: StageContext[FitParams]) -> FitOutput:
     """su, au (T,n_au), pose (T,6), motion mesh (T,V,3) m, residual (T,K) m, rms (T,) m."""
     from physanim.face.fit import embed_landmarks, fit_sequence
     from physanim.face.model import load_face_model
 
-    params: FitParams = ctx.params  # type: ignore[assignment]
-    tracked = ctx.input("track")
-    names = list(tracked.attrs["names"])
-    points, conf = tracked["points"][...], tracked["confidence"][...]
+    names, points, conf = track.landmark_names, track.points, track.confidence
     _check_tracked(points, conf, params)
     model = load_face_model()
     embedding = embed_landmarks(model, names, points, conf, params)
     result = fit_sequence(model, embedding, points, conf, params, progress=ctx.progress("fit"))
-    ctx.write_record(result)
-    ctx.write_record(embedding, prefix="embedding")
-    ctx.write("triangles", model.triangles)
-    ctx.out.attrs.update(
-        au_names=list(model.au_names), su_names=list(model.su_names),
-        vertex_names=list(model.vertex_names), landmark_names=names,
-    )  # fmt: skip
     ctx.summary.update(
         rms_mm=round(float(result.rms.mean()) * 1e3, 3),
         max_rms_mm=round(float(result.rms.max()) * 1e3, 3),
     )
+    return FitOutput(
+        result.su, result.au, result.pose, result.motion, result.residual, result.rms,
+        embedding, model.triangles, list(model.au_names), list(model.su_names),
+        list(model.vertex_names), list(names),
+    )  # fmt: skip
 
 
 def _check_tracked(points: np.ndarray, confidence: np.ndarray, params: FitParams) -> None:
     """Refuse tracks (T, K, 3) m / (T, K) that cannot be fitted, saying why and what to do."""
-    import numpy as np
-
     usable = np.isfinite(points).all(axis=2) & (confidence >= params.min_confidence)
     per_frame = usable.sum(axis=1)
     if not (per_frame >= 3).any():
@@ -60,11 +79,9 @@ def _check_tracked(points: np.ndarray, confidence: np.ndarray, params: FitParams
         )
 
 
-SPEC = StageSpec(
-    name="fit",
-    upstream=("track",),
-    params=FitParams,
+SPEC = StageSpec.typed(
+    "fit",
+    compute,
     version="1",
-    compute=compute,
     doc="rigid pose + shape units once, action units per frame -> motion mesh",
 )

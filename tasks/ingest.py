@@ -7,33 +7,65 @@ need them, so that planning (``physanim status``) never pays for open3d, VTK or 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+import numpy as np
 from pydantic import BaseModel
 
 from physanim.capture.params import IngestParams
 from physanim.pipeline import DatasetParams, ProgressFactory, StageContext, StageSpec
 
 
-def fingerprint(dataset: DatasetParams, params: BaseModel) -> Mapping[str, object]:
+@dataclass(frozen=True)
+class IngestOutput:
+    """An ingested recording of T frames (``physanim.capture.frames.Capture`` as stored).
+
+    ``color`` (T, H, W, 3) uint8 RGB and ``depth`` (T, H, W) float32 m (NaN invalid), read
+    lazily (Zarr arrays); ``K`` (3, 3) px intrinsics; ``depth_scale`` m per raw unit (None:
+    stereo); ``timestamps`` (T,) s; ``frame_index`` (T,) on the recording's grid; ``fps``
+    frames/s; ``valid_fraction`` (T,); ``depth_median`` (T,) m; the frame-grid findings
+    (``dropped``, ``duplicated``, ``recovered``, ``implausible_depth``), ``warnings``, the
+    source ``kind``/``origin`` and the ``source`` reader.
+    """
+
+    color: np.ndarray = field(metadata={"lazy": True})
+    depth: np.ndarray = field(metadata={"lazy": True})
+    K: np.ndarray
+    depth_scale: float | None
+    timestamps: np.ndarray
+    frame_index: np.ndarray
+    fps: float
+    source: str
+    valid_fraction: np.ndarray
+    depth_median: np.ndarray
+    dropped: list[int]
+    duplicated: list[int]
+    recovered: list[int]
+    warnings: list[str]
+    implausible_depth: list[int]
+    kind: str
+    origin: str
+
+
+def fingerprint(dataset: DatasetParams, params: IngestParams) -> Mapping[str, object]:
     """Name, size and modification time of exactly the files ingest will read
     (``source_files``: never the run directory of a dataset-root layout)."""
     from physanim.capture.ingest import find_source, source_files
     from physanim.store import files_fingerprint
 
     try:
-        kind, path = find_source(dataset.path, params.source)  # type: ignore[attr-defined]
+        kind, path = find_source(dataset.path, params.source)
     except (FileNotFoundError, ValueError):
         return {"missing": str(dataset.path)}  # ingest itself reports what is missing
     return {"source": kind, "files": files_fingerprint(source_files(kind, path), dataset.path)}
 
 
-def compute(ctx: StageContext) -> None:
+def compute(params: IngestParams, ctx: StageContext[IngestParams]) -> IngestOutput:
     """colour (T,H,W,3) uint8, depth (T,H,W) float32 m (NaN invalid), K, timestamps (T,) s."""
     from physanim.capture.ingest import load_capture
 
-    capture = load_capture(ctx.dataset_dir, ctx.params, ctx.progress("ingest"))  # type: ignore[arg-type]
-    ctx.write_record(capture)
+    capture = load_capture(ctx.dataset_dir, params, ctx.progress("ingest"))
     ctx.summary.update(
         source=capture.source,
         frames=capture.n_frames,
@@ -45,14 +77,13 @@ def compute(ctx: StageContext) -> None:
         implausible_depth_frames=capture.implausible_depth,
         warnings=capture.warnings,
     )
+    return IngestOutput(**{f.name: getattr(capture, f.name) for f in fields(IngestOutput)})
 
 
-SPEC = StageSpec(
-    name="ingest",
-    upstream=(),
-    params=IngestParams,
+SPEC = StageSpec.typed(
+    "ingest",
+    compute,
     version="2",
-    compute=compute,
     doc="RealSense bag / Open3D RGBD folder / stereo pair -> colour, metric depth, intrinsics",
     fingerprint=fingerprint,
 )

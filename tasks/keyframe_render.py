@@ -1,11 +1,16 @@
-"""Stage ``keyframe_render``: capsule-figure frames, MP4 and a joint-angle plot."""
+"""Stage ``keyframe_render``: capsule-figure frames, MP4 and a joint-angle plot.
+
+Version 3: the list of files ``written`` is stored as an attribute of the output.
+"""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from physanim.pipeline import StageContext, StageSpec
-from tasks.keyframes import KeyframeStageParams, project_path
+from tasks.keyframes import KeyframesOutput, KeyframeStageParams, project_path
 
 
 class KeyframeRenderParams(BaseModel):
@@ -20,17 +25,25 @@ class KeyframeRenderParams(BaseModel):
     elevation_deg: float = Field(15.0, ge=-90, le=90, description="camera elevation, deg")
 
 
-def compute(ctx: StageContext) -> None:
+@dataclass(frozen=True)
+class KeyframeRenderOutput:
+    """The files written in files/ (frames, ``animation.mp4``, the joint-angle plot)."""
+
+    written: list[str]
+
+
+def compute(
+    params: KeyframeRenderParams,
+    keyframes: KeyframesOutput,
+    ctx: StageContext[KeyframeRenderParams],
+) -> KeyframeRenderOutput:
     """Render the upstream animation into this output's files/."""
     from physanim.dynamics import Figure
     from physanim.dynamics.keyframes import KeyframeSpec, environment, root_path
     from physanim.render.figure import render_animation
 
-    params: KeyframeRenderParams = ctx.params  # type: ignore[assignment]
-    anim = ctx.input("keyframes")
-    up = KeyframeStageParams.model_validate(
-        ctx.store.provenance("keyframes", ctx.upstream["keyframes"])["params"]
-    )
+    anim = keyframes
+    up = ctx.upstream_params("keyframes", KeyframeStageParams)
     spec = KeyframeSpec.from_yaml(project_path(up.file))
     fig = Figure.from_yaml(spec.figure)
     missing = [n for n in params.trail_links if n not in fig.joint_names]
@@ -42,29 +55,29 @@ def compute(ctx: StageContext) -> None:
         guides = {"root path": path.positions}
     written = render_animation(
         fig,
-        anim["q"][...],
-        anim["placement/base_pos"][...],
+        anim.q,
+        anim.placement.base_pos,
         spec.fps,
         ctx.files_dir,
         env=environment(spec),
         trail_links=params.trail_links,
-        com=anim["placement/com"][...] if params.com_trail else None,
+        com=anim.placement.com if params.com_trail else None,
         guides=guides,
-        simulated=anim["simulated"][...],
+        simulated=anim.simulated,
         key_times=[k.frame / spec.fps for k in spec.keys],
         title=spec.name,
         azimuth=params.azimuth_deg,
         elevation=params.elevation_deg,
         progress=ctx.progress("render"),
     )
-    ctx.summary["files"] = sorted(str(p.relative_to(ctx.files_dir)) for p in written.values())
+    files = sorted(str(p.relative_to(ctx.files_dir)) for p in written.values())
+    ctx.summary["files"] = files
+    return KeyframeRenderOutput(files)
 
 
-SPEC = StageSpec(
-    name="keyframe_render",
-    upstream=("keyframes",),
-    params=KeyframeRenderParams,
-    version="2",
-    compute=compute,
+SPEC = StageSpec.typed(
+    "keyframe_render",
+    compute,
+    version="3",
     doc="capsule figure frames + MP4 + joint-angle plot",
 )

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from physanim.dynamics.params import KeyframeParams
+from physanim.dynamics.placement import Placement
 from physanim.pipeline import DatasetParams, StageContext, StageSpec
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -35,11 +38,29 @@ class KeyframeStageParams(BaseModel):
         return v
 
 
-def fingerprint(_dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]:
+@dataclass(frozen=True)
+class KeyframesOutput:
+    """The animation of F frames, n joints (``physanim.dynamics.keyframes.KeyframeResult``):
+    ``times`` (F,) s, ``q`` (F, n) rad, ``qd`` (F, n) rad/s, ``simulated`` (F, n) bool, the
+    world ``placement``; ``joint_names`` (n), ``fps`` frames/s, the ``figure`` file and the
+    animation's ``name``."""
+
+    times: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    simulated: np.ndarray
+    placement: Placement
+    joint_names: list[str]
+    fps: float
+    figure: str
+    name: str
+
+
+def fingerprint(_dataset: DatasetParams, params: KeyframeStageParams) -> Mapping[str, str]:
     """Content hashes of the keyframe file and of the figure it names."""
     from physanim.dynamics.keyframes import KeyframeSpec
 
-    spec_path = project_path(params.file)  # type: ignore[attr-defined]
+    spec_path = project_path(params.file)
     spec = KeyframeSpec.from_yaml(spec_path)
     return {
         str(p.name): hashlib.sha256(p.read_bytes()).hexdigest()
@@ -47,23 +68,14 @@ def fingerprint(_dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]
     }
 
 
-def compute(ctx: StageContext) -> None:
+def compute(params: KeyframeStageParams, ctx: StageContext[KeyframeStageParams]) -> KeyframesOutput:
     """Animate; arrays q, qd (F, n) rad, simulated mask, placement (base_pos, com, ...)."""
-    import numpy as np
-
     from physanim.dynamics import Figure
     from physanim.dynamics.keyframes import KeyframeSpec, run_keyframes
 
-    params: KeyframeStageParams = ctx.params  # type: ignore[assignment]
     spec = KeyframeSpec.from_yaml(project_path(params.file))
     fig = Figure.from_yaml(spec.figure)
     result = run_keyframes(fig, spec, params=params.numerics, progress=ctx.progress("keyframes"))
-    ctx.write_record(result.placement, prefix="placement")
-    for name in ("times", "q", "qd", "simulated"):
-        ctx.write(name, getattr(result, name))
-    ctx.out.attrs.update(
-        joint_names=list(fig.joint_names), fps=spec.fps, figure=spec.figure, name=spec.name
-    )
     contact = result.placement.contact
     ctx.summary.update(
         frames=len(result.q),
@@ -74,14 +86,16 @@ def compute(ctx: StageContext) -> None:
         steps = np.diff(result.placement.base_pos[:, [0, 2]], axis=0)
         ctx.summary["path_length_m"] = round(float(np.linalg.norm(steps, axis=1).sum()), 4)
         ctx.summary["path_spacing"] = spec.path.spacing
+    return KeyframesOutput(
+        result.times, result.q, result.qd, result.simulated, result.placement,
+        list(fig.joint_names), spec.fps, spec.figure, spec.name,
+    )  # fmt: skip
 
 
-SPEC = StageSpec(
-    name="keyframes",
-    upstream=(),
-    params=KeyframeStageParams,
+SPEC = StageSpec.typed(
+    "keyframes",
+    compute,
     version="2",
-    compute=compute,
     doc="keyframe interpolation, passive dynamics in chosen intervals, contact and flight",
     fingerprint=fingerprint,
 )

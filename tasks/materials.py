@@ -2,10 +2,19 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
 from pydantic import ConfigDict, Field
 
 from physanim.mesh.params import MaterialModel, MaterialsParams, TissueMaterial
 from physanim.pipeline import StageContext, StageSpec
+from tasks.align import AlignOutput
+from tasks.tetra import TetraOutput
+
+if TYPE_CHECKING:
+    from physanim.fem.materials import TetMaterials
 
 #: The seed's uniform model (SPEC section 1, item 6), used when no materials file is merged.
 UNIFORM = MaterialModel(
@@ -23,41 +32,66 @@ class MaterialsStageParams(MaterialsParams):
     model: MaterialModel = Field(default_factory=lambda: UNIFORM.model_copy(deep=True))
 
 
-def compute(ctx: StageContext) -> None:
-    """skin_labels (n_skin,), tet_labels (m,), E Pa, nu, eta Pa s, rho kg/m^3 per tet; PNG."""
-    import numpy as np
+@dataclass(frozen=True)
+class MaterialsOutput:
+    """Per-tet materials of the m tets: ``E`` Pa, ``nu``, ``eta`` Pa s, ``rho`` kg/m^3 (m,);
+    ``tet_labels`` (m,) int8 and ``scan_labels`` (N_scan,) region indices into
+    ``region_names``; ``files/regions.png`` shows the regions on the scan."""
 
+    E: np.ndarray
+    nu: np.ndarray
+    eta: np.ndarray
+    rho: np.ndarray
+    tet_labels: np.ndarray
+    scan_labels: np.ndarray
+    region_names: list[str]
+
+    def materials(self) -> TetMaterials:
+        """The per-tet values as :class:`~physanim.fem.materials.TetMaterials`."""
+        from physanim.fem.materials import TetMaterials
+
+        return TetMaterials(self.E, self.nu, self.eta, self.rho)
+
+
+def compute(
+    params: MaterialsStageParams,
+    align: AlignOutput,
+    tetra: TetraOutput,
+    ctx: StageContext[MaterialsStageParams],
+) -> MaterialsOutput:
+    """skin_labels (n_skin,), tet_labels (m,), E Pa, nu, eta Pa s, rho kg/m^3 per tet; PNG."""
     from physanim.mesh.materials import tet_materials
     from physanim.mesh.params import REGION_NAMES
     from physanim.mesh.regions import plot_regions, region_areas, skin_regions, tet_regions
 
-    params: MaterialsStageParams = ctx.params  # type: ignore[assignment]
-    aligned, tets_out = ctx.input("align"), ctx.input("tetra")
-    landmarks = dict(zip(aligned.attrs["landmark_names"], aligned["landmarks"][...], strict=True))
-    scan_v, scan_f = aligned["scan_vertices"][...], aligned["scan_faces"][...]
-    nodes, tets = tets_out["nodes"][...], tets_out["tets"][...]
+    landmarks = align.landmark_positions()
+    scan_v, scan_f = align.scan_vertices, align.scan_faces
     scan_labels = skin_regions(scan_v, landmarks, params)
-    labels = tet_regions(nodes, tets, scan_v, scan_labels)
+    labels = tet_regions(tetra.nodes, tetra.tets, scan_v, scan_labels)
     mats = tet_materials(labels, params.model)
-    ctx.write_record(mats)
-    ctx.write("tet_labels", labels.astype(np.int8))
-    ctx.write("scan_labels", scan_labels)
     plot_regions(scan_v, scan_f, scan_labels, ctx.files_dir / "regions.png", landmarks)
     areas = region_areas(scan_v, scan_f, scan_labels)
     names = ["default", *REGION_NAMES]
-    ctx.out.attrs["region_names"] = names
     ctx.summary.update(
         model=params.model.name,
         region_area_cm2={n: round(float(a) * 1e4, 3) for n, a in zip(names, areas, strict=True)},
         tets_per_region={n: int((labels == i).sum()) for i, n in enumerate(names)},
     )
+    return MaterialsOutput(
+        mats.E, mats.nu, mats.eta, mats.rho, labels.astype(np.int8), scan_labels, names
+    )
 
 
-SPEC = StageSpec(
-    name="materials",
-    upstream=("align", "tetra"),
-    params=MaterialsStageParams,
+def model_name(params: MaterialsStageParams) -> str:
+    """The material model's name: what tells variants of a run apart in the report."""
+    return params.model.name
+
+
+SPEC = StageSpec.typed(
+    "materials",
+    compute,
     version="1",
-    compute=compute,
     doc="regions (Cheek, cphs L/R, Cheilion, cphi, Alare, default) -> per-tet materials",
+    files={"regions.png": "Material regions"},
+    label=model_name,
 )

@@ -2,13 +2,23 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from physanim.muscle.arm import ArmResult
 from physanim.muscle.params import ArmConditions
 from physanim.pipeline import StageContext, StageSpec
 
-if TYPE_CHECKING:  # the solver loads numba; planning does not need it
+if TYPE_CHECKING:
     from physanim.muscle.arm import TorqueShortfall
+
+
+@dataclass(frozen=True)
+class MusclesOutput:
+    """Every arm condition solved: condition name -> :class:`~physanim.muscle.arm.ArmResult`
+    (time axis first, SI units), stored as one group per condition."""
+
+    conditions: dict[str, ArmResult] = field(metadata={"stored": ""})
 
 
 def shortfall_warning(condition: str, gap: TorqueShortfall) -> str:
@@ -21,7 +31,7 @@ def shortfall_warning(condition: str, gap: TorqueShortfall) -> str:
     )
 
 
-def compute(ctx: StageContext) -> None:
+def compute(params: ArmConditions, ctx: StageContext[ArmConditions]) -> MusclesOutput:
     """Solve each condition; arrays under ``<condition>/<field>`` (time axis first).
 
     The summary flags torques the muscles cannot produce (``feasible``, ``infeasible`` spans
@@ -29,13 +39,12 @@ def compute(ctx: StageContext) -> None:
     """
     from physanim.muscle.arm import solve_arm, torque_shortfalls
 
-    params: ArmConditions = ctx.params  # type: ignore[assignment]
     studies = params.resolved()
     report = ctx.progress("muscles")
     peaks, infeasible, warnings = {}, {}, []
+    results = {}
     for i, (name, study) in enumerate(studies.items()):
-        result = solve_arm(study)
-        ctx.write_record(result, prefix=name)
+        result = results[name] = solve_arm(study)
         peaks[name] = {
             m.name: round(float(result.activation[:, j].max()), 4)
             for j, m in enumerate(study.arm.muscles)
@@ -56,19 +65,18 @@ def compute(ctx: StageContext) -> None:
         report(i + 1, len(studies))
     ctx.summary["peak_activation"] = peaks
     ctx.summary["max_torque_residual_Nm"] = max(
-        float(abs(ctx.out[f"{n}/torque_residual"][...]).max()) for n in studies
+        float(abs(r.torque_residual).max()) for r in results.values()
     )
     ctx.summary["feasible"] = not infeasible
     ctx.summary["infeasible"] = infeasible
     if warnings:
         ctx.summary["warnings"] = warnings
+    return MusclesOutput(results)
 
 
-SPEC = StageSpec(
-    name="muscles",
-    upstream=(),
-    params=ArmConditions,
+SPEC = StageSpec.typed(
+    "muscles",
+    compute,
     version="2",
-    compute=compute,
     doc="inverse dynamics, force sharing and Zajac activations per condition",
 )

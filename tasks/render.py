@@ -11,12 +11,30 @@ import hashlib
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from physanim.evaluate.face import FaceEvaluation
 from physanim.pipeline import StageContext, StageSpec
+from tasks.align import AlignOutput
+from tasks.ingest import IngestOutput
+from tasks.simulate import SimulateOutput
+from tasks.tetra import TetraOutput
+from tasks.track import TrackOutput
+
+#: What the render stage's files show (a report lists those present), path -> caption.
+FILES = {
+    "panel.mp4": "Capture | fit | kinematic scan | FEM",
+    "fidelity.png": "Motion fidelity against the truth, per region (0 = moves like the actor)",
+    "lip_gap.png": "Lip gap: truth, FEM, kinematic scan",
+    "jaw.png": "Jaw opening estimated from the tracked mandible landmarks",
+    "symmetry.png": "Symmetry cost (tracked, kinematic, FEM)",
+    "mouth_corners.png": "Mouth-corner displacement",
+    "energies.png": "FEM energies",
+}
 
 
 class RenderParams(BaseModel):
@@ -31,6 +49,16 @@ class RenderParams(BaseModel):
         0.0, ge=0.0, le=100.0, description="colour-bar top, mm (0: the run's maximum)"
     )
     turntable: bool = Field(False, description="turn the 3D tiles once around over the video")
+
+
+@dataclass(frozen=True)
+class RenderOutput:
+    """The render's summary figures (its frames, video and plots are files, see ``FILES``):
+    ``frames`` rendered, ``video`` file name, ``codec``."""
+
+    frames: int
+    video: str
+    codec: str
 
 
 class TileCache:
@@ -72,13 +100,22 @@ class TileCache:
         return tiles
 
 
-def compute(ctx: StageContext) -> None:
+def compute(
+    params: RenderParams,
+    ingest: IngestOutput,
+    track: TrackOutput,
+    align: AlignOutput,
+    tetra: TetraOutput,
+    simulate: SimulateOutput,
+    evaluate: FaceEvaluation,
+    ctx: StageContext[RenderParams],
+) -> RenderOutput:
     """panel frames + video + plots of the upstream chain."""
     import numpy as np
 
     from physanim.mesh.embed import embedding_matrix
     from physanim.mesh.kinematic import blend_frames
-    from physanim.mesh.seam import MouthLine
+    from physanim.render.crop import face_crop
     from physanim.render.face import ColourMap, frontal_camera, render_sequence
     from physanim.render.panel import draw_landmarks, panel, write_mp4
     from physanim.render.plots import (
@@ -90,22 +127,19 @@ def compute(ctx: StageContext) -> None:
         plot_symmetry_cost,
     )
 
-    params: RenderParams = ctx.params  # type: ignore[assignment]
-    cap, tracked, aligned = ctx.input("ingest"), ctx.input("track"), ctx.input("align")
-    mesh, sim, ev = ctx.input("tetra"), ctx.input("simulate"), ctx.input("evaluate")
-    frames = np.arange(0, sim["displacements"].shape[0], params.every_frames)
+    sim, ev = simulate, evaluate
+    frames = np.arange(0, sim.displacements.shape[0], params.every_frames)
     size = (params.tile_width_px, params.tile_height_px)
 
-    scan_v, scan_f = aligned["scan_vertices"][...], aligned["scan_faces"][...]
+    scan_v, scan_f = align.scan_vertices, align.scan_faces
     camera = frontal_camera(scan_v, size, bar=True)
     # the FEM tile shows the high-res scan embedded in the tets, moved by their displacement
-    nodes, tets = mesh["nodes"][...], mesh["tets"][...]
-    mouth = MouthLine(aligned["mouth_line"][...], float(aligned.attrs["lip_band_m"]))
+    nodes, tets = tetra.nodes, tetra.tets
+    mouth = align.mouth()
     embed = embedding_matrix(
-        scan_v, aligned["scan_side"][...], nodes, tets, mouth.side(nodes[tets].mean(axis=1))
+        scan_v, align.scan_side, nodes, tets, mouth.side(nodes[tets].mean(axis=1))
     )
-    node_disp = sim["displacements"].get_orthogonal_selection((frames, slice(None), slice(None)))
-    disp = blend_frames(embed, node_disp)
+    disp = blend_frames(embed, sim.displacements[frames])
     magnitude_mm = np.linalg.norm(disp, axis=-1) * 1e3
     top = params.displacement_max_mm or max(float(magnitude_mm.max()), 1e-3)
     bar = ColourMap("displacement (mm)", clim=(0.0, top))
@@ -114,11 +148,11 @@ def compute(ctx: StageContext) -> None:
     t0 = time.perf_counter()
     jobs = {
         "CANDIDE-style fit": dict(
-            vertices=aligned["motion"][...][frames], faces=aligned["triangles"][...],
+            vertices=align.motion[frames], faces=align.triangles,
             progress=ctx.progress("render fit"),
         ),
         "kinematic scan": dict(
-            vertices=aligned["kinematic"].get_orthogonal_selection(
+            vertices=align.kinematic.get_orthogonal_selection(
                 (frames, slice(None), slice(None))
             ),
             faces=scan_f, progress=ctx.progress("render kinematic"),
@@ -141,31 +175,22 @@ def compute(ctx: StageContext) -> None:
         }  # fmt: skip
         tiles = {name: f.result() for name, f in futures.items()}
     render_s = time.perf_counter() - t0
-    colour = cap["color"].get_orthogonal_selection((frames,))
-    uv, conf = tracked["uv"][...][frames], tracked["confidence"][...][frames]
+    colour = ingest.color.get_orthogonal_selection((frames,))
+    uv, conf = track.uv[frames], track.confidence[frames]
 
     out = ctx.files_dir
     (out / "frames").mkdir(exist_ok=True)
     panels = []
-    seen = uv[np.isfinite(uv).all(axis=-1)]
-    if len(seen):  # crop the capture to the face (landmarks' box + 60 %), aspect of a tile
-        (u0, v0), (u1, v1) = seen.min(axis=0), seen.max(axis=0)
-        half_h = 0.8 * max(v1 - v0, (u1 - u0) * size[1] / size[0])
-        half_w = half_h * size[0] / size[1]
-        cu, cv = (u0 + u1) / 2, (v0 + v1) / 2
-        h, w = colour.shape[1:3]
-        box = (max(int(cv - half_h), 0), min(int(cv + half_h), h),
-               max(int(cu - half_w), 0), min(int(cu + half_w), w))  # fmt: skip
-    else:
-        box = (0, colour.shape[1], 0, colour.shape[2])
+    # the capture cropped to the face: the landmarks' box + 60 %, with the aspect of a tile
+    box = face_crop(uv, colour.shape[1:3], size)
     offset = np.array([box[2], box[0]])
     for i, t in enumerate(frames):
         crop = np.ascontiguousarray(colour[i, box[0] : box[1], box[2] : box[3]])
         captured = draw_landmarks(crop, uv[i] - offset, conf[i], radius=2)
         images = [captured, *(v[i] for v in tiles.values())]
-        frame = panel(images, [f"capture t={t / float(aligned.attrs['fps']):.2f} s", *tiles])
+        frame = panel(images, [f"capture t={t / float(track.fps):.2f} s", *tiles])
         panels.append(frame)
-    fps = float(aligned.attrs["fps"]) / params.every_frames
+    fps = float(track.fps) / params.every_frames
 
     def write_pngs() -> None:
         import cv2
@@ -180,26 +205,25 @@ def compute(ctx: StageContext) -> None:
         if pngs is not None:
             pngs.result()
 
-    time_s = np.asarray(sim["times"][...])
-    names = list(ev.attrs["landmark_names"])
-    ch = [names.index("ch_L"), names.index("ch_R")]
-    variants = ("tracked", "kinematic", "fem")
-    plot_symmetry_cost(time_s, {v: ev[f"{v}/cost"][...] for v in variants}, out / "symmetry")
-    mouth = {v: ev[f"{v}/displacement"][...][:, ch] for v in variants}
-    plot_mouth_corners(time_s, mouth, out / "mouth_corners")
-    energies = {q: sim[q][...] for q in ("kinetic", "strain", "dissipated")}
+    time_s = np.asarray(sim.times)
+    ch = ev.mouth_corners
+    variants = {"tracked": ev.tracked, "kinematic": ev.kinematic, "fem": ev.fem}
+    plot_symmetry_cost(time_s, {v: m.cost for v, m in variants.items()}, out / "symmetry")
+    corners = {v: m.displacement[:, ch] for v, m in variants.items()}
+    plot_mouth_corners(time_s, corners, out / "mouth_corners")
+    energies = {"kinetic": sim.kinetic, "strain": sim.strain, "dissipated": sim.dissipated}
     plot_energies(time_s, {"fem": energies}, out / "energies")
-    if "jaw" in sim:
-        plot_jaw(time_s, sim["jaw/angle"][...], sim["jaw/residual_m"][...], out / "jaw")
-    if "lip_gap_truth" in ev:
-        models = ("fem", "kinematic")
-        peaks = {k: float(time_s[v]) for k, v in ev.attrs["summary"]["peak_frames"].items()}
+    if sim.jaw is not None:
+        plot_jaw(time_s, sim.jaw.angle, sim.jaw.residual_m, out / "jaw")
+    if ev.lip_gap_truth is not None and ev.fidelity_fem and ev.fidelity_kinematic:
+        fidelity = {"fem": ev.fidelity_fem, "kinematic": ev.fidelity_kinematic}
+        peaks = {k: float(time_s[v]) for k, v in (ev.peak_frames or {}).items()}
         plot_fidelity(
-            time_s, {m: ev[f"fidelity_{m}/overall"][...] for m in models},
-            {m: ev[f"fidelity_{m}/regions"][...] for m in models}, list(ev.attrs["regions"]),
+            time_s, {m: f.overall for m, f in fidelity.items()},
+            {m: f.regions for m, f in fidelity.items()}, list(ev.regions or []),
             out / "fidelity", peaks=peaks,
         )  # fmt: skip
-        gaps = {m: ev[f"lip_gap_{m}"][...] for m in ("truth", *models)}
+        gaps = {"truth": ev.lip_gap_truth, "fem": ev.lip_gap_fem, "kinematic": ev.lip_gap_kinematic}
         plot_lip_gap(time_s, gaps, out / "lip_gap")
     ctx.summary.update(
         frames=len(frames),
@@ -207,13 +231,13 @@ def compute(ctx: StageContext) -> None:
         codec=codec,
         render_s_per_frame=round(render_s / max(len(frames), 1), 4),
     )
+    return RenderOutput(frames=len(frames), video=video.name, codec=codec)
 
 
-SPEC = StageSpec(
-    name="render",
-    upstream=("ingest", "track", "align", "tetra", "simulate", "evaluate"),
-    params=RenderParams,
-    version="3",
-    compute=compute,
+SPEC = StageSpec.typed(
+    "render",
+    compute,
+    version="4",
     doc="panel video (capture | fit | kinematic | FEM), symmetry / mouth / energy plots",
+    files=FILES,
 )

@@ -1,16 +1,45 @@
-"""Stage ``tetra``: closed soft-tissue volume behind the skin, fTetWild tets, node labels."""
+"""Stage ``tetra``: closed soft-tissue volume behind the skin, fTetWild tets, node labels.
+
+Version 3: the landmark names are no longer copied here (``landmark_node`` follows align's
+``landmark_names``).
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
 from physanim.mesh.params import TetraParams
 from physanim.pipeline import StageContext, StageSpec
+from tasks.align import AlignOutput
 
 
-def compute(ctx: StageContext) -> None:
+@dataclass(frozen=True)
+class TetraOutput:
+    """The tissue volume: ``nodes`` (n, 3) m, ``tets`` (m, 4), cut along the lip seam;
+    ``skin`` / ``bone`` (n,) bool masks; ``side`` (n,) lip side; ``landmark_node`` (L,) the
+    skin node of each of align's landmarks, ``landmark_distance`` (L,) m from it;
+    ``skin_anchor`` (n,) the bone node behind each skin node; ``thickness`` (N_scan,) m of
+    the tissue behind each scan vertex; ``quality`` the mesh quality report."""
+
+    nodes: np.ndarray
+    tets: np.ndarray
+    skin: np.ndarray
+    bone: np.ndarray
+    side: np.ndarray
+    landmark_node: np.ndarray
+    landmark_distance: np.ndarray
+    skin_anchor: np.ndarray
+    thickness: np.ndarray
+    quality: dict[str, Any]
+
+
+def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraParams]) -> TetraOutput:
     """nodes (n,3) m, tets (m,4), skin/bone masks, lip sides, landmark nodes, skin anchors;
     quality report in attrs."""
-
-    from physanim.mesh.seam import MouthLine, cut_tets
+    from physanim.mesh.seam import cut_tets
     from physanim.mesh.tetra import (
         label_nodes,
         landmark_nodes,
@@ -19,51 +48,38 @@ def compute(ctx: StageContext) -> None:
     )
     from physanim.mesh.tissue import build_tissue_surface
 
-    params: TetraParams = ctx.params  # type: ignore[assignment]
-    aligned = ctx.input("align")
-    names = list(aligned.attrs["landmark_names"])
-    landmarks = aligned["landmarks"][...]
     # the tissue is built from the scan before its lip seam (originals come first), then cut
-    parent = aligned["scan_parent"][...]
-    n_uncut = int(parent.max()) + 1
+    n_uncut = int(align.scan_parent.max()) + 1
     surface = build_tissue_surface(
-        aligned["scan_vertices"][:n_uncut],
-        parent[aligned["scan_faces"][...]],
-        dict(zip(names, landmarks, strict=True)),
+        align.scan_vertices[:n_uncut],
+        align.scan_parent[align.scan_faces],
+        align.landmark_positions(),
         params,
     )
     report = ctx.progress("tetra")
     report(0, 1)
     mesh, quality = tetrahedralize_surface(surface.vertices, surface.faces, params)
     report(1, 1)
-    mouth = MouthLine(aligned["mouth_line"][...], float(aligned.attrs["lip_band_m"]))
+    mouth = align.mouth()
     cut = cut_tets(mesh.nodes, mesh.tets, mouth)
     nodes = cut.nodes(mesh.nodes)
     labels = label_nodes(mesh, surface, params)
     skin, bone = labels.skin[cut.parent], labels.bone[cut.parent]
     landmark_node, landmark_distance = landmark_nodes(
-        nodes, skin, cut.side, landmarks, mouth.side(landmarks)
+        nodes, skin, cut.side, align.landmarks, mouth.side(align.landmarks)
     )
-    ctx.write("nodes", nodes)
-    ctx.write("tets", cut.elements)
-    ctx.write("skin", skin)
-    ctx.write("bone", bone)
-    ctx.write("side", cut.side)
-    ctx.write("landmark_node", landmark_node)
-    ctx.write("landmark_distance", landmark_distance)
-    ctx.write("skin_anchor", skin_anchors(nodes, bone, surface))
-    ctx.write("thickness", surface.thickness)
-    ctx.out.attrs.update(quality=quality.as_dict(), landmark_names=names)
     ctx.summary.update(
         quality.as_dict(), lip_seam_faces=cut.n_seam_faces, seam_nodes=len(nodes) - len(mesh.nodes)
     )
+    return TetraOutput(
+        nodes, cut.elements, skin, bone, cut.side, landmark_node, landmark_distance,
+        skin_anchors(nodes, bone, surface), surface.thickness, quality.as_dict(),
+    )  # fmt: skip
 
 
-SPEC = StageSpec(
-    name="tetra",
-    upstream=("align",),
-    params=TetraParams,
-    version="2",
-    compute=compute,
+SPEC = StageSpec.typed(
+    "tetra",
+    compute,
+    version="3",
     doc="tissue volume (skin + bone-side offset), fTetWild tets, quality, node labels",
 )

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+import numpy as np
+from pydantic import ConfigDict, Field
 
 from physanim.pipeline import DatasetParams, StageContext, StageSpec
 from physanim.tracking.params import TrackParams
+from tasks.ingest import IngestOutput
 
 
 class TrackStageParams(TrackParams):
@@ -25,13 +28,34 @@ class TrackStageParams(TrackParams):
     stereo_dir: str = Field("stereo", description="stereo pair folder, relative to the dataset")
 
 
-def fingerprint(dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]:
+@dataclass(frozen=True)
+class TrackOutput:
+    """K landmarks tracked over T frames (``physanim.tracking.track.Tracks`` plus what they are).
+
+    ``uv`` (T, K, 2) px and ``points`` (T, K, 3) m camera frame, NaN where unobserved;
+    ``confidence`` (T, K) in [0, 1]; ``head_pose`` (T, 4, 4) camera <- actor, m;
+    ``template`` (K, 3) m neutral landmark positions in the actor frame; ``landmark_names``
+    (K) (stored as ``names``); ``fps`` frames/s of the capture; ``backend``, ``lift``.
+    """
+
+    uv: np.ndarray
+    points: np.ndarray
+    confidence: np.ndarray
+    head_pose: np.ndarray
+    template: np.ndarray
+    landmark_names: list[str] = field(metadata={"stored": "names"})
+    fps: float
+    backend: str
+    lift: str
+
+
+def fingerprint(dataset: DatasetParams, params: TrackStageParams) -> Mapping[str, str]:
     """Content hash of the marker template (names and neutral positions)."""
     from physanim.tracking.template import load_marker_template
 
-    if params.backend == "markerless":  # type: ignore[attr-defined]
+    if params.backend == "markerless":
         return {"template": "face model"}
-    path = dataset.path / params.template  # type: ignore[attr-defined]
+    path = dataset.path / params.template
     if not path.exists():
         return {"template": "missing"}
     names, pos = load_marker_template(path)
@@ -39,7 +63,9 @@ def fingerprint(dataset: DatasetParams, params: BaseModel) -> Mapping[str, str]:
     return {"template": digest}
 
 
-def compute(ctx: StageContext) -> None:
+def compute(
+    params: TrackStageParams, ingest: IngestOutput, ctx: StageContext[TrackStageParams]
+) -> TrackOutput:
     """uv (T,K,2) px, points (T,K,3) m camera frame, confidence (T,K), head_pose (T,4,4).
 
     Refuses tracks with nothing lifted to 3D or a face of the wrong size (``check_tracks``);
@@ -50,18 +76,16 @@ def compute(ctx: StageContext) -> None:
     from physanim.tracking.checks import check_tracks
     from physanim.tracking.template import load_marker_template
 
-    params: TrackStageParams = ctx.params  # type: ignore[assignment]
     tracking = TrackParams.model_validate(
         params.model_dump(exclude={"template", "lift", "stereo_dir"})
     )
-    cap = ctx.input("ingest")
-    fps = float(cap.attrs["fps"])
+    fps = float(ingest.fps)
     progress = ctx.progress("track")
     if params.backend == "markerless":
         from physanim.tracking.markerless import feature_template, track_markerless_rgbd
 
         names, template = list(FEATURE_POINTS), feature_template()
-        frames = (cap["color"][...], cap["depth"][...], cap["K"][...])
+        frames = (ingest.color[...], ingest.depth[...], ingest.K)
         tracks = track_markerless_rgbd(*frames, fps, tracking, progress)
     elif params.lift == "stereo":
         from physanim.tracking.stereo_track import read_stereo_pairs, track_markers_stereo
@@ -73,27 +97,26 @@ def compute(ctx: StageContext) -> None:
         from physanim.tracking.track import track_markers_rgbd
 
         names, template = load_marker_template(ctx.dataset_dir / params.template)
-        frames = (cap["color"][...], cap["depth"][...], cap["K"][...])
+        frames = (ingest.color[...], ingest.depth[...], ingest.K)
         tracks = track_markers_rgbd(*frames, template, fps, tracking, progress)
     what = "the face model" if params.backend == "markerless" else f"the template {params.template}"
     problems = check_tracks(tracks, template, params.backend, what)
     for message in problems:
         warnings.warn(message, UserWarning, stacklevel=1)
-    ctx.write_record(tracks)
-    ctx.write("template", template)
-    ctx.out.attrs.update(names=names, fps=fps, backend=params.backend, lift=params.lift)
     seen = tracks.confidence > 0
     ctx.summary.update(
         markers=len(names), tracked_fraction=round(float(seen.mean()), 4), warnings=problems
     )
+    return TrackOutput(
+        tracks.uv, tracks.points, tracks.confidence, tracks.head_pose, template, list(names),
+        fps, params.backend, params.lift,
+    )  # fmt: skip
 
 
-SPEC = StageSpec(
-    name="track",
-    upstream=("ingest",),
-    params=TrackStageParams,
+SPEC = StageSpec.typed(
+    "track",
+    compute,
     version="2",
-    compute=compute,
     doc="markers (or markerless face mesh) tracked in 2D, lifted to 3D (depth/stereo), smoothed",
     fingerprint=fingerprint,
 )

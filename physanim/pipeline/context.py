@@ -5,13 +5,18 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Generic, TypeVar
 
 import numpy as np
 import zarr
 from pydantic import BaseModel
 
 from physanim.pipeline.spec import DatasetParams, StageSpec
-from physanim.store import StageStore, write_array, write_dataclass
+from physanim.store import StageStore, read_dataclass, write_array, write_dataclass
+
+P = TypeVar("P", bound=BaseModel)
+T = TypeVar("T")
+M = TypeVar("M", bound=BaseModel)
 
 #: progress callback passed to library loops: (done, total) -> None
 ProgressFn = Callable[[int, int], None]
@@ -23,7 +28,7 @@ def _no_progress(_description: str) -> ProgressFn:
 
 
 @dataclass
-class StageContext:
+class StageContext(Generic[P]):
     """Inputs and outputs of one stage execution.
 
     ``out`` is the (temporary) Zarr group of this output; it becomes visible to readers only
@@ -31,8 +36,8 @@ class StageContext:
     rare stage that needs another section (e.g. dataset paths).
     """
 
-    spec: StageSpec
-    params: BaseModel
+    spec: StageSpec[P]
+    params: P
     key: str
     upstream: Mapping[str, str]
     store: StageStore
@@ -46,6 +51,16 @@ class StageContext:
         if stage not in self.upstream:
             raise KeyError(f"stage {self.spec.name} does not declare {stage!r} as upstream")
         return self.store.open(stage, self.upstream[stage])
+
+    def read(self, stage: str, output: type[T]) -> T:
+        """The output of upstream ``stage`` as its dataclass ``output`` (typed stages)."""
+        return read_dataclass(output, self.input(stage))
+
+    def upstream_params(self, stage: str, model: type[M]) -> M:
+        """The params upstream ``stage`` ran with, as its params ``model``."""
+        if stage not in self.upstream:
+            raise KeyError(f"stage {self.spec.name} does not declare {stage!r} as upstream")
+        return model.model_validate(self.store.provenance(stage, self.upstream[stage])["params"])
 
     def write(self, name: str, data: np.ndarray) -> zarr.Array:
         """Write one array of this output, chunked by frames."""

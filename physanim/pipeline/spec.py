@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
+import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
 if TYPE_CHECKING:
     from physanim.pipeline.context import StageContext
+
+P = TypeVar("P", bound=BaseModel)
 
 
 class DatasetParams(BaseModel):
@@ -46,25 +51,102 @@ def dataset_overrides(dataset: str) -> list[str]:
 
 
 @dataclass(frozen=True)
-class StageSpec:
+class TypedCompute:
+    """The ``compute(ctx)`` of a typed stage (what the runner calls).
+
+    Reads each upstream output as the dataclass ``function`` declares for it, calls
+    ``function(params, **upstream outputs[, ctx=ctx])`` and writes the dataclass it returns.
+    A plain frozen dataclass of module-level objects, so a stage pickles to Dask workers.
+    """
+
+    function: Callable[..., Any]
+    inputs: tuple[tuple[str, type], ...]
+    output: type
+    wants_ctx: bool
+
+    def __call__(self, ctx: StageContext[Any]) -> None:
+        kwargs: dict[str, Any] = {name: ctx.read(name, cls) for name, cls in self.inputs}
+        if self.wants_ctx:
+            kwargs["ctx"] = ctx
+        result = self.function(ctx.params, **kwargs)
+        if not isinstance(result, self.output):
+            raise TypeError(
+                f"stage {ctx.spec.name} returned {type(result).__name__}, "
+                f"declared {self.output.__name__}"
+            )
+        ctx.write_record(result)
+
+
+@dataclass(frozen=True)
+class StageSpec(Generic[P]):
     """One stage: its name, upstream stages, params model, code version and compute function.
 
     ``version`` is bumped by hand whenever the stage's code changes its output; it is part of
     the content key.  ``fingerprint`` optionally returns JSON-able facts about input files
-    (sizes, mtimes, hashes) that the key must also depend on.
+    (sizes, mtimes, hashes) that the key must also depend on.  ``output``: the dataclass the
+    stage stores (typed stages, built by :meth:`typed`), None for a stage that writes its
+    group itself.  ``files``: plain files the stage writes in its ``files/`` folder that a
+    report shows, relative path -> caption (PNG figures, the MP4 video).
     """
 
     name: str
     upstream: tuple[str, ...]
-    params: type[BaseModel]
+    params: type[P]
     version: str
-    compute: Callable[[StageContext], None]
+    compute: Callable[[StageContext[P]], None]
     doc: str = ""
-    fingerprint: Callable[[DatasetParams, BaseModel], Mapping[str, Any]] | None = None
+    fingerprint: Callable[[DatasetParams, P], Mapping[str, Any]] | None = None
+    output: type | None = None
+    files: Mapping[str, str] = field(default_factory=dict)
+    label: Callable[[P], str] | None = None
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():
             raise ValueError(f"stage name {self.name!r} must be a Python identifier")
+
+    @classmethod
+    def typed(
+        cls,
+        name: str,
+        compute: Callable[..., Any],
+        version: str,
+        doc: str = "",
+        fingerprint: Callable[[DatasetParams, P], Mapping[str, Any]] | None = None,
+        files: Mapping[str, str] | None = None,
+        label: Callable[[Any], str] | None = None,
+    ) -> StageSpec[Any]:
+        """A stage from a typed function ``compute(params: P, <upstream>: <Output>, ...,
+        ctx: StageContext[P]) -> Output``: its first argument's annotation is the params model,
+        every further argument names an upstream stage and is annotated with that stage's
+        output dataclass, an argument called ``ctx`` (optional) receives the context
+        (progress, summary, files), and the return annotation is this stage's output dataclass.
+        """
+        hints = typing.get_type_hints(compute)
+        names = list(inspect.signature(compute).parameters)
+        if not names or names[0] not in hints or "return" not in hints:
+            raise TypeError(f"stage {name}: compute must annotate its params and its return")
+        inputs = tuple((n, hints[n]) for n in names[1:] if n != "ctx")
+        output = hints["return"]
+        for what, t in (("output", output), *inputs):
+            if not dataclasses.is_dataclass(t):
+                raise TypeError(f"stage {name}: {what} is annotated {t!r}, not a dataclass")
+        run = TypedCompute(compute, inputs, output, "ctx" in names)
+        return cls(
+            name, tuple(n for n, _ in inputs), hints[names[0]], version, run, doc,
+            fingerprint, output, dict(files or {}), label,
+        )  # fmt: skip
+
+    @property
+    def inputs(self) -> Mapping[str, type]:
+        """Upstream stage -> the output dataclass this stage reads from it (typed stages)."""
+        return dict(self.compute.inputs) if isinstance(self.compute, TypedCompute) else {}
+
+
+def describe_output(cls: type | None) -> str:
+    """``Name(field, field, ...)`` of an output dataclass; ``group`` for an untyped stage."""
+    if cls is None:
+        return "group"
+    return f"{cls.__name__}({', '.join(f.name for f in dataclasses.fields(cls))})"
 
 
 @dataclass(frozen=True)
@@ -90,6 +172,14 @@ class Pipeline:
                 raise ValueError(
                     f"pipeline {self.name}: stage {s.name} needs {missing} declared before it"
                 )
+            for u, wanted in s.inputs.items():
+                given = self.stage(u).output
+                if given is not wanted:
+                    raise ValueError(
+                        f"pipeline {self.name}: stage {s.name} reads {u} as "
+                        f"{getattr(wanted, '__name__', wanted)}, but {u} stores "
+                        f"{getattr(given, '__name__', given)}"
+                    )
             seen.add(s.name)
 
     def stage(self, name: str) -> StageSpec:
@@ -129,16 +219,35 @@ class Pipeline:
             f"{self.name.title()}Config", __config__=ConfigDict(extra="forbid"), **sections
         )
 
+    def edges(self) -> list[tuple[str, str, type | None]]:
+        """(upstream, stage, output dataclass the edge carries; None: an untyped group)."""
+        return [(u, s.name, self.stage(u).output) for s in self.stages for u in s.upstream]
+
+    def text(self) -> str:
+        """The DAG as text: each stage, its version, doc, and what each incoming edge carries."""
+        out = []
+        for s in self.stages:
+            out.append(f"{s.name} (v{s.version})" + (f": {s.doc}" if s.doc else "") + "\n")
+            out += [f"  <- {u}: {describe_output(self.stage(u).output)}\n" for u in s.upstream]
+        return "".join(out)
+
     def mermaid(self) -> str:
-        """The DAG as Mermaid flowchart text."""
+        """The DAG as Mermaid flowchart text, each edge labelled with the dataclass it carries."""
         lines = ["flowchart LR"]
         lines += [f"  {s.name}[{s.name}]" for s in self.stages if not s.upstream]
-        lines += [f"  {u} --> {s.name}" for s in self.stages for u in s.upstream]
+        lines += [f"  {u} -->{_label(t, '|')} {s}" for u, s, t in self.edges()]
         return "\n".join(lines) + "\n"
 
     def dot(self) -> str:
-        """The DAG as Graphviz dot text."""
+        """The DAG as Graphviz dot text, each edge labelled with the dataclass it carries."""
         lines = [f"digraph {self.name} {{", "  rankdir=LR;"]
         lines += [f'  "{s.name}";' for s in self.stages]
-        lines += [f'  "{u}" -> "{s.name}";' for s in self.stages for u in s.upstream]
+        lines += [
+            f'  "{u}" -> "{s}"' + (f' [label="{t.__name__}"]' if t else "") + ";"
+            for u, s, t in self.edges()
+        ]
         return "\n".join(lines) + "\n}\n"
+
+
+def _label(output: type | None, bar: str) -> str:
+    return f"{bar}{output.__name__}{bar}" if output is not None else ""

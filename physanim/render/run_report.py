@@ -1,7 +1,12 @@
 """The HTML report of a face-pipeline run, assembled from the stage store.
 
 Not a stage: it is a view over the runs the store recorded, so it can compare every variant
-of ``simulate``/``evaluate`` computed so far (material models, sweeps) side by side.
+computed so far (material models, sweeps) side by side.  It is driven by what the stages
+declare, never by their names: the files each stage shows (``StageSpec.files``: figures and
+the video), the summaries they record, the stage whose output is a
+:class:`~physanim.evaluate.face.FaceEvaluation` (compared across runs), the stage it evaluates
+(its last upstream, whose summary and key the report quotes) and the stages that name a
+variant (``StageSpec.label``).
 """
 
 from __future__ import annotations
@@ -12,112 +17,118 @@ from typing import Any
 
 import numpy as np
 
+from physanim.evaluate.face import FaceEvaluation
+from physanim.pipeline.spec import Pipeline, StageSpec
 from physanim.render.plots import plot_mouth_corners, plot_symmetry_cost
 from physanim.render.report import build_report
-from physanim.store import StageStore
+from physanim.store import StageStore, read_dataclass
 
 
-def variant_label(store: StageStore, evaluate_key: str) -> str:
-    """Human label of an evaluate output: its material model and simulate key prefix."""
-    sim_key = store.provenance("evaluate", evaluate_key)["upstream"]["simulate"]
-    sim = store.provenance("simulate", sim_key)
-    model = store.provenance("materials", sim["upstream"]["materials"])["params"]["model"]
-    return f"{model['name']} ({sim_key[:6]})"
+def evaluation_stage(pipeline: Pipeline) -> StageSpec[Any] | None:
+    """The stage whose output is a FaceEvaluation (None: the pipeline has none)."""
+    return next((s for s in pipeline.stages if s.output is FaceEvaluation), None)
 
 
-def shown_variants(store: StageStore) -> list[str]:
-    """Evaluate keys of the complete runs recorded in the store (run manifests, sweep variants
-    included), oldest first, whose materials, simulate and evaluate outputs are intact."""
+def variant_label(pipeline: Pipeline, store: StageStore, key: str) -> str:
+    """Human label of an evaluation output: the labels its upstream stages declare for their
+    params (e.g. the material model), and the key prefix of the output it evaluates."""
+    spec = evaluation_stage(pipeline)
+    assert spec is not None
+    upstream = store.provenance(spec.name, key)["upstream"]
+    labels = []
+    for s in pipeline.stages:
+        if s.label is not None and s.name in upstream:
+            labels.append(
+                s.label(
+                    s.params.model_validate(store.provenance(s.name, upstream[s.name])["params"])
+                )
+            )
+    evaluated = upstream[spec.upstream[-1]]
+    return f"{' '.join(labels)} ({evaluated[:6]})"
+
+
+def shown_variants(store: StageStore, chain: Sequence[str]) -> list[str]:
+    """Keys of the last stage of ``chain`` in the complete runs recorded in the store (run
+    manifests, sweep variants included), oldest first, whose ``chain`` outputs are intact."""
     shown: list[str] = []
     for run in sorted(store.runs(), key=lambda r: r.name):
-        key = run.keys.get("evaluate")
-        chain = ("materials", "simulate", "evaluate")
+        key = run.keys.get(chain[-1])
         if (
-            run.info.get("complete")
+            key is not None
+            and run.info.get("complete")
             and key not in shown
             and all(s in run.keys and store.has(s, run.keys[s]) for s in chain)
         ):
-            shown.append(key)  # type: ignore[arg-type]
+            shown.append(key)
     return shown
 
 
+def variant_row(summary: dict[str, Any]) -> dict[str, Any]:
+    """One column of the variants table from an evaluation's summary."""
+    fem = summary.get("fem", {})
+    fidelity = summary.get("fidelity", {}).get("fem", {})
+    philtrum = summary.get("philtrum_peak_mm", {})
+    surface = summary.get("surface_distance_rms_mm", {})
+    return {
+        "mean symmetry cost": fem.get("mean_symmetry_cost"),
+        "peak mouth corner L/R (mm)": fem.get("peak_mouth_corner_mm"),
+        "right / left philtrum peak (mm)": [philtrum.get("right"), philtrum.get("left")],
+        **{
+            f"FEM relative displacement error, {peak} peak": value.get("overall")
+            for peak, value in fidelity.items()
+            if isinstance(value, dict)
+        },
+        "surface distance RMS FEM / kinematic (mm)": [surface.get("fem"), surface.get("kinematic")],
+        "free-region lag (s)": summary.get("free_lag_s"),
+    }
+
+
 def write_run_report(
-    store: StageStore, entries: Sequence[Any], out_dir: Path, title: str
+    pipeline: Pipeline, store: StageStore, entries: Sequence[Any], out_dir: Path, title: str
 ) -> Path | None:
-    """Write ``out_dir/index.html`` for the plan ``entries`` of one run; None if not rendered."""
-    keys = {e.stage: e.key for e in entries}
-    if "render" not in keys or not store.has("render", keys["render"]):
+    """Write ``out_dir/index.html`` for the plan ``entries`` of one run; None if no stage
+    declaring a video has its output."""
+    keys = {e.stage: e.key for e in entries if store.has(e.stage, e.key)}
+    shown = [s for s in pipeline.stages if s.name in keys]
+    videos = [(s, f) for s in shown for f in s.files if f.endswith(".mp4")]
+    video = next(
+        (store.files(s.name, keys[s.name]) / f for s, f in videos
+         if (store.files(s.name, keys[s.name]) / f).exists()),
+        None,
+    )  # fmt: skip
+    if video is None:
         return None
     out_dir.mkdir(parents=True, exist_ok=True)
-    render = store.files("render", keys["render"])
     images = [
-        (caption, render / f"{stem}.png")
-        for caption, stem in (
-            ("Motion fidelity against the truth, per region (0 = moves like the actor)",
-             "fidelity"),
-            ("Lip gap: truth, FEM, kinematic scan", "lip_gap"),
-            ("Jaw opening estimated from the tracked mandible landmarks", "jaw"),
-            ("Symmetry cost (tracked, kinematic, FEM)", "symmetry"),
-            ("Mouth-corner displacement", "mouth_corners"),
-            ("FEM energies", "energies"),
-        )
-        if (render / f"{stem}.png").exists()
-    ]  # fmt: skip
-    evaluated = store.provenance("evaluate", keys["evaluate"]).get("summary", {})
-    jaw_peak = evaluated.get("peak_frames", {}).get("jaw_open")
-    if jaw_peak is not None and (render / "frames" / f"{jaw_peak:04d}.png").exists():
-        images.insert(0, (f"Panel at the jaw-drop peak (frame {jaw_peak})",
-                          render / "frames" / f"{jaw_peak:04d}.png"))  # fmt: skip
-    regions = store.files("materials", keys["materials"]) / "regions.png"
-    if regions.exists():
-        images.append(("Material regions", regions))
-
+        (caption, store.files(s.name, keys[s.name]) / f)
+        for s in reversed(shown)
+        for f, caption in s.files.items()
+        if f.endswith(".png") and (store.files(s.name, keys[s.name]) / f).exists()
+    ]
+    spec = evaluation_stage(pipeline)
+    evaluated: dict[str, Any] = {}
+    simulated: dict[str, Any] = {}
     variants: dict[str, dict[str, Any]] = {}
-    cost, mouth = {}, {}
-    time = None
-    for k in shown_variants(store):
-        label = variant_label(store, k)
-        ev = store.open("evaluate", k)
-        summary = dict(ev.attrs.get("summary", {}))
-        names = list(ev.attrs["landmark_names"])
-        ch = [names.index("ch_L"), names.index("ch_R")]
-        cost[label] = ev["fem/cost"][...]
-        mouth[label] = ev["fem/displacement"][...][:, ch]
-        fem = summary.get("fem", {})
-        fidelity = summary.get("fidelity", {}).get("fem", {})
-        philtrum = summary.get("philtrum_peak_mm", {})
-        variants[label] = {
-            "mean symmetry cost": fem.get("mean_symmetry_cost"),
-            "peak mouth corner L/R (mm)": fem.get("peak_mouth_corner_mm"),
-            "right / left philtrum peak (mm)": [philtrum.get("right"), philtrum.get("left")],
-            **{
-                f"FEM relative displacement error, {peak} peak": value.get("overall")
-                for peak, value in fidelity.items()
-                if isinstance(value, dict)
-            },
-            "surface distance RMS FEM / kinematic (mm)": [
-                summary.get("surface_distance_rms_mm", {}).get("fem"),
-                summary.get("surface_distance_rms_mm", {}).get("kinematic"),
-            ],
-            "free-region lag (s)": summary.get("free_lag_s"),
-        }
-        sim_key = store.provenance("evaluate", k)["upstream"]["simulate"]
-        time = store.open("simulate", sim_key)["times"][...]
-    if len(variants) > 1 and time is not None and len({len(c) for c in cost.values()}) == 1:
-        images.append(("Symmetry cost per variant", plot_symmetry_cost(
-            np.asarray(time), cost, out_dir / "variants_symmetry")[0]))  # fmt: skip
-        images.append(("Mouth corners per variant", plot_mouth_corners(
-            np.asarray(time), mouth, out_dir / "variants_mouth")[0]))  # fmt: skip
+    if spec is not None and spec.name in keys:
+        evaluated = store.provenance(spec.name, keys[spec.name]).get("summary", {})
+        target = spec.upstream[-1]
+        simulated = (
+            store.provenance(target, keys[target]).get("summary", {}) if target in keys else {}
+        )
+        peak = evaluated.get("peak_frames", {}).get("jaw_open")
+        panel = video.parent / "frames" / f"{peak:04d}.png" if peak is not None else None
+        if panel is not None and panel.exists():
+            images.insert(0, (f"Panel at the jaw-drop peak (frame {peak})", panel))
+        variants = _compare_variants(pipeline, spec, store, out_dir, images)
 
     key_figures: dict[str, Any] = {}
-    for stage in ("track", "fit", "tetra", "simulate", "evaluate", "render"):
-        if stage in keys and store.has(stage, keys[stage]):
-            for name, value in store.provenance(stage, keys[stage]).get("summary", {}).items():
-                if not isinstance(value, dict | list) or stage == "evaluate":
-                    key_figures[f"{stage}: {name}"] = value
+    for s in shown:
+        for name, value in store.provenance(s.name, keys[s.name]).get("summary", {}).items():
+            if not isinstance(value, dict | list) or s is spec:
+                key_figures[f"{s.name}: {name}"] = value
     stage_table = []
     for e in entries:
-        if not store.has(e.stage, e.key):
+        if e.stage not in keys:
             continue
         prov = store.provenance(e.stage, e.key)
         stage_table.append(
@@ -135,17 +146,43 @@ def write_run_report(
         )
     return build_report(
         out_dir,
-        tables=capture_tables(
-            evaluated, store.provenance("simulate", keys["simulate"]).get("summary", {})
-        ),
+        tables=capture_tables(evaluated, simulated),
         title=title,
-        video=render / "panel.mp4",
+        video=video,
         images=images,
         key_figures=key_figures,
         stage_table=stage_table,
         variants=variants,
         subtitle=f"store {store.root}",
     )
+
+
+def _compare_variants(
+    pipeline: Pipeline,
+    spec: StageSpec[Any],
+    store: StageStore,
+    out_dir: Path,
+    images: list[tuple[str, Path]],
+) -> dict[str, dict[str, Any]]:
+    """The variants table (label -> row) of every recorded run's evaluation; with more than
+    one, their symmetry cost and mouth corners plotted together (appended to ``images``)."""
+    variants: dict[str, dict[str, Any]] = {}
+    cost, mouth = {}, {}
+    time = None
+    for k in shown_variants(store, pipeline.upstream(spec.name)):
+        label = variant_label(pipeline, store, k)
+        group = store.open(spec.name, k)
+        ev = read_dataclass(FaceEvaluation, group)
+        cost[label] = ev.fem.cost
+        mouth[label] = ev.fem.displacement[:, ev.mouth_corners]
+        variants[label] = variant_row(dict(group.attrs.get("summary", {})))
+        time = ev.times
+    if len(variants) > 1 and time is not None and len({len(c) for c in cost.values()}) == 1:
+        images.append(("Symmetry cost per variant", plot_symmetry_cost(
+            np.asarray(time), cost, out_dir / "variants_symmetry")[0]))  # fmt: skip
+        images.append(("Mouth corners per variant", plot_mouth_corners(
+            np.asarray(time), mouth, out_dir / "variants_mouth")[0]))  # fmt: skip
+    return variants
 
 
 def capture_tables(evaluated: dict[str, Any], simulated: dict[str, Any]) -> dict[str, Any]:

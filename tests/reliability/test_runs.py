@@ -117,7 +117,7 @@ def test_clean_after_variants_face_sequence(face_copy: Path) -> None:
     plain = invoke("run", *args[:-1])  # as typed: no --local (nothing to run: no Prefect)
     assert plain.returncode == 0, plain.stderr
     assert "0 stage(s) ran" in plain.stderr and "report:" in plain.stderr
-    assert refined["evaluate"] in shown_variants(store)
+    assert refined["evaluate"] in shown_variants(store, FACE.upstream("evaluate"))
     report = (ROOT / face_copy / "runs" / "report" / "index.html").read_text()
     assert re.search(rf"<th>uniform \({refined['simulate'][:6]}\)</th>", report)
     assert_store_tells_the_truth(store)

@@ -1,0 +1,267 @@
+"""How a simulated face performs the capture: the evaluate stage's computation.
+
+Per variant (FEM skin at the landmark nodes, kinematic motion mesh, tracked landmarks with the
+head pose removed): the seed's symmetry cost and displacement curves; the lag of the free skin
+behind the driven nodes; the philtrum regions' peak displacement; and, with a ground truth
+(``physanim.evaluate.truth``), the motion fidelity per frame and facial region, the lip gap
+and the RMS point-to-surface distance of the FEM skin and of the kinematic scan.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field
+
+from physanim.evaluate.fidelity import Fidelity
+from physanim.evaluate.measures import LandmarkMeasures
+from physanim.evaluate.truth import Truth
+from physanim.mesh.seam import MouthLine
+
+
+class EvaluateParams(BaseModel):
+    """Evaluation settings."""
+
+    model_config = ConfigDict(extra="forbid")
+    truth: str = Field("ground_truth.zarr", description="ground truth in the dataset, if any")
+    error_every_frames: int = Field(
+        10,
+        ge=1,
+        le=1000,
+        description="frame stride of the surface distance to the truth (10: the demo's RMS "
+        "within 0.05 % of every frame's, at a tenth of the closest-point searches)",
+    )
+    error_max_points: int = Field(4000, ge=100, le=10**6, description="scan points sampled")
+    max_lag_frames: int = Field(15, ge=1, le=300, description="search range of the lag, frames")
+    min_motion_m: float = Field(
+        1e-3,
+        gt=0.0,
+        le=0.05,
+        description="fidelity counts points whose true motion exceeds this, m",
+    )
+    lip_offset_m: float = Field(
+        0.003, gt=0.0, le=0.02, description="lip midline points this far above / below the mouth, m"
+    )
+
+
+@dataclass(frozen=True)
+class FaceRun:
+    """What the evaluation reads of one run (T frames, L landmarks, n nodes, N scan vertices).
+
+    ``landmark_names`` (L) and ``landmarks`` (L, 3) m the feature points on the scan;
+    ``fem_landmarks``, ``kinematic_landmarks``, ``tracked_landmarks`` (T, L, 3) m the three
+    variants' landmark trajectories (head frame); ``nodes`` (n, 3) m, ``tets`` (m, 4),
+    ``skin`` (n,) bool, ``displacements`` (T, n, 3) m; ``driven`` the node ids the drive
+    holds; ``tet_labels`` (m,) into ``region_names``; ``mouth`` the lip seam;
+    ``scan_vertices`` (N, 3) m, ``scan_side`` (N,), ``kinematic`` (T, N, 3) m (a Zarr array
+    or numpy array, read by rows); ``times`` (T,) s of the frames; ``fps`` frames/s.
+    """
+
+    landmark_names: list[str]
+    landmarks: NDArray
+    fem_landmarks: NDArray
+    kinematic_landmarks: NDArray
+    tracked_landmarks: NDArray
+    nodes: NDArray
+    tets: NDArray
+    skin: NDArray
+    displacements: NDArray
+    driven: NDArray
+    tet_labels: NDArray
+    region_names: list[str]
+    mouth: MouthLine
+    scan_vertices: NDArray
+    scan_side: NDArray
+    kinematic: Any
+    times: NDArray
+    fps: float
+
+
+@dataclass(frozen=True)
+class FaceEvaluation:
+    """The evaluate stage's output.
+
+    ``fem``, ``kinematic``, ``tracked``: landmark measures of each variant (curves (T,) and
+    (T, L) in the order of align's ``landmark_names``); ``mouth_corners`` the indices of
+    ch_L and ch_R on that axis; ``times`` (T,) s; ``philtrum_right`` /
+    ``philtrum_left`` (T,) m mean displacement of the free nodes of each philtrum region.
+    With ground truth (else None): ``peak_frames`` expression -> frame; ``fidelity_fem`` /
+    ``fidelity_kinematic`` relative displacement error per frame and region (``regions``);
+    ``lip_gap_truth`` / ``lip_gap_fem`` / ``lip_gap_kinematic`` (T,) m; ``truth_frames``
+    (F,) and ``error_fem`` / ``error_kinematic`` (F,) m RMS distance to the true surface.
+    """
+
+    fem: LandmarkMeasures
+    kinematic: LandmarkMeasures
+    tracked: LandmarkMeasures
+    mouth_corners: list[int]
+    times: NDArray
+    philtrum_right: NDArray
+    philtrum_left: NDArray
+    peak_frames: dict[str, int] | None = None
+    regions: list[str] | None = None
+    fidelity_fem: Fidelity | None = None
+    fidelity_kinematic: Fidelity | None = None
+    lip_gap_truth: NDArray | None = None
+    lip_gap_fem: NDArray | None = None
+    lip_gap_kinematic: NDArray | None = None
+    truth_frames: NDArray | None = None
+    error_fem: NDArray | None = None
+    error_kinematic: NDArray | None = None
+
+
+def evaluate_face(
+    run: FaceRun, truth: Truth | None, params: EvaluateParams
+) -> tuple[FaceEvaluation, dict[str, Any]]:
+    """The measures of one run and its summary (rounded figures: mm, s, ratios)."""
+    from physanim.evaluate.measures import driven_free_lag, landmark_measures
+    from physanim.names import name_index
+
+    names = run.landmark_names
+    variants = {
+        "fem": run.fem_landmarks,
+        "kinematic": run.kinematic_landmarks,
+        "tracked": run.tracked_landmarks,
+    }
+    measures = {label: landmark_measures(pts, names) for label, pts in variants.items()}
+    ch = name_index(names, ["ch_L", "ch_R"])
+    summary: dict[str, Any] = {
+        label: {
+            "mean_symmetry_cost": round(float(np.mean(m.cost[1:])), 4),
+            "peak_mouth_corner_mm": [round(float(m.peak[i]) * 1e3, 3) for i in ch],
+            "peak_mouth_corner_frame": [int(m.peak_frame[i]) for i in ch],
+        }
+        for label, m in measures.items()
+    }
+    disp = run.displacements
+    free = np.setdiff1d(np.nonzero(run.skin)[0], run.driven)
+    lag = driven_free_lag(disp, run.driven, free, params.max_lag_frames)
+    summary["free_lag_s"] = round(lag / run.fps, 4)
+    philtrum = philtrum_curves(run)
+    summary["philtrum_peak_mm"] = {
+        side: round(float(curve.max()) * 1e3, 4) for side, curve in philtrum.items()
+    }
+    fields: dict[str, Any] = {}
+    if truth is not None:
+        found, figures = _against_truth(run, truth, params)
+        fields.update(found)
+        summary.update(figures)
+    evaluation = FaceEvaluation(
+        **measures,
+        mouth_corners=[int(i) for i in ch],
+        times=np.asarray(run.times),
+        philtrum_right=philtrum["right"],
+        philtrum_left=philtrum["left"],
+        **fields,
+    )
+    return evaluation, summary
+
+
+def philtrum_curves(run: FaceRun) -> dict[str, NDArray]:
+    """Mean displacement (T,) m of the free nodes of the right and left philtrum regions
+    (cphs_R / cphs_L), keyed ``right`` / ``left``."""
+    from physanim.names import name_index
+
+    magnitude = np.linalg.norm(run.displacements, axis=-1)
+    out = {}
+    for side, region in (("right", "cphs_R"), ("left", "cphs_L")):
+        label = name_index(run.region_names, [region])[0]
+        nodes = np.setdiff1d(np.unique(run.tets[run.tet_labels == label]), run.driven)
+        out[side] = (
+            magnitude[:, nodes].mean(axis=1) if len(nodes) else np.zeros(len(run.displacements))
+        )
+    return out
+
+
+def _against_truth(
+    run: FaceRun, truth: Truth, params: EvaluateParams
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Motion fidelity per frame and region, the lip gap, and the surface distance of the FEM
+    skin and the kinematic scan against the truth: (output fields, summary entries)."""
+    from physanim.evaluate.fidelity import (
+        REGIONS,
+        face_regions,
+        follow_truth,
+        lip_gap,
+        lip_midline_points,
+        motion_fidelity,
+    )
+    from physanim.evaluate.measures import surface_errors
+    from physanim.mesh.embed import embedding_matrix
+    from physanim.mesh.kinematic import blend_frames
+
+    disp, nodes, tets, mouth = run.displacements, run.nodes, run.tets, run.mouth
+    landmarks = dict(zip(run.landmark_names, run.landmarks, strict=True))
+    skin = np.nonzero(run.skin)[0]
+    scan_v, scan_side = run.scan_vertices, run.scan_side
+    rng = np.random.default_rng(0)
+    scan_idx = np.sort(rng.choice(len(scan_v), min(len(scan_v), params.error_max_points), False))
+    lips = list(lip_midline_points(mouth, scan_v, scan_side, params.lip_offset_m))
+    embed = embedding_matrix(  # the FEM moves the lip points as it moves the rendered scan
+        scan_v[lips], scan_side[lips], nodes, tets, mouth.side(nodes[tets].mean(axis=1))
+    )
+    true_lips = follow_truth(scan_v[lips], truth.vertices, truth.faces).displacement
+    true_gap = lip_gap(*(scan_v[lips][None] + true_lips).transpose(1, 0, 2))
+    kin = run.kinematic
+    models = {
+        "fem": (nodes[skin], disp[:, skin], scan_v[lips] + blend_frames(embed, disp)),
+        "kinematic": (
+            scan_v[scan_idx],
+            _rows(kin, scan_idx) - scan_v[scan_idx],
+            _rows(kin, np.asarray(lips)),
+        ),
+    }
+    peaks = truth.peak_frames()
+    fields: dict[str, Any] = {"peak_frames": peaks, "regions": list(REGIONS)}
+    fields["lip_gap_truth"] = true_gap
+    out: dict[str, Any] = {"peak_frames": peaks, "lip_gap_mm": {}, "fidelity": {}}
+    for label, (rest, moved, lip_pts) in models.items():
+        tm = follow_truth(rest, truth.vertices, truth.faces)
+        fid = motion_fidelity(moved, tm.displacement, face_regions(rest, landmarks),
+                              params.min_motion_m)  # fmt: skip
+        fields[f"fidelity_{label}"] = fid
+        gap = lip_gap(lip_pts[:, 0], lip_pts[:, 1])
+        fields[f"lip_gap_{label}"] = gap
+        out["fidelity"][label] = {
+            name: {
+                "overall": _r(fid.overall[f]),
+                **{r: _r(fid.regions[f, i]) for i, r in enumerate(REGIONS)},
+            }
+            for name, f in peaks.items()
+        } | {"worst_frame": int(np.nanargmax(fid.overall)), "worst": _r(np.nanmax(fid.overall))}
+        out["lip_gap_mm"][label] = {
+            name: round(float(gap[f]) * 1e3, 3) for name, f in peaks.items()
+        }
+    out["lip_gap_mm"]["truth"] = {n: round(float(true_gap[f]) * 1e3, 3) for n, f in peaks.items()}
+
+    # the RMS point-to-surface distance (blind to sliding and to a shut mouth)
+    frames = list(range(0, disp.shape[0], params.error_every_frames))
+    rng = np.random.default_rng(0)
+    skin_idx = rng.choice(skin, min(len(skin), params.error_max_points), False)
+    n_scan = len(scan_v)
+    scan_idx = np.sort(rng.choice(n_scan, min(n_scan, params.error_max_points), False))
+    fem_skin = nodes[skin_idx][None] + disp[:, skin_idx]
+    err_fem, err_kin = surface_errors(
+        [fem_skin, _rows(kin, scan_idx)], truth.vertices, truth.faces, frames
+    )
+    fields.update(truth_frames=np.asarray(frames), error_fem=err_fem, error_kinematic=err_kin)
+    out["surface_distance_rms_mm"] = {
+        "fem": round(float(np.sqrt(np.mean(err_fem**2))) * 1e3, 3),
+        "kinematic": round(float(np.sqrt(np.mean(err_kin**2))) * 1e3, 3),
+    }
+    return fields, out
+
+
+def _rows(frames: Any, idx: NDArray) -> NDArray:
+    """``frames[:, idx]`` (T, len(idx), 3) of a numpy or Zarr array (T, N, 3)."""
+    if isinstance(frames, np.ndarray):
+        return frames[:, idx]
+    return np.asarray(frames.get_orthogonal_selection((slice(None), idx, slice(None))))
+
+
+def _r(x: float) -> float | None:
+    return None if not math.isfinite(float(x)) else round(float(x), 4)
