@@ -49,18 +49,25 @@ class TrackOutput:
     lift: str
 
 
-def fingerprint(dataset: DatasetParams, params: TrackStageParams) -> Mapping[str, str]:
-    """Content hash of the marker template (names and neutral positions)."""
+def fingerprint(dataset: DatasetParams, params: TrackStageParams) -> Mapping[str, object]:
+    """Content hash of the marker template (names and neutral positions); with
+    ``lift: stereo``, size and modification time of every file of the stereo pair."""
+    from physanim.store import files_fingerprint
     from physanim.tracking.template import load_marker_template
 
+    out: dict[str, object] = {}
+    if params.lift == "stereo" and params.backend != "markerless":
+        stereo = dataset.path / params.stereo_dir
+        files = [p for p in stereo.rglob("*") if p.is_file()] if stereo.is_dir() else []
+        out["stereo"] = files_fingerprint(files, dataset.path)
     if params.backend == "markerless":
-        return {"template": "face model"}
+        return {"template": "face model", **out}
     path = dataset.path / params.template
     if not path.exists():
-        return {"template": "missing"}
+        return {"template": "missing", **out}
     names, pos = load_marker_template(path)
     digest = hashlib.sha256(("|".join(names)).encode() + pos.tobytes()).hexdigest()
-    return {"template": digest}
+    return {"template": digest, **out}
 
 
 def compute(

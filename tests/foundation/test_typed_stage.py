@@ -1,0 +1,46 @@
+"""Adding a stage: output dataclass + compute + StageSpec + Pipeline, run by the real runner."""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel
+
+from physanim.pipeline import Pipeline, StageSpec, execute_plan_locally, make_plan
+from physanim.store import StageStore, read_dataclass
+
+
+class RampParams(BaseModel):
+    n: int = 5  # samples
+
+
+class GainParams(BaseModel):
+    gain: float = 3.0  # dimensionless
+
+
+@dataclass(frozen=True)
+class Ramp:
+    values: np.ndarray  # (n,) m
+    unit: str
+
+
+def ramp(params: RampParams) -> Ramp:
+    return Ramp(np.arange(float(params.n)), "m")
+
+
+def gain(params: GainParams, ramp: Ramp) -> Ramp:
+    return Ramp(ramp.values * params.gain, ramp.unit)
+
+
+STAGES = (StageSpec.typed("ramp", ramp, "1"), StageSpec.typed("gain", gain, "1"))
+TWO = Pipeline("two", STAGES, default_config=Path("two.yaml"))
+
+
+def test_toy_typed_stage_runs_through_the_runner_and_store(tmp_path):
+    config = TWO.config_model().model_validate({"dataset": {"dir": str(tmp_path)}})
+    store = StageStore(config.dataset.store_path)
+    execute_plan_locally(TWO, config, make_plan(TWO, config, store))
+    out = read_dataclass(Ramp, store.open("gain"))
+    np.testing.assert_array_equal(out.values, [0.0, 3.0, 6.0, 9.0, 12.0])
+    assert out.unit == "m" and TWO.stage("gain").inputs == {"ramp": Ramp}
+    assert "ramp -->|Ramp| gain" in TWO.mermaid() and "<- ramp: Ramp(values, unit)" in TWO.text()
