@@ -164,12 +164,15 @@ def _compare_variants(
     out_dir: Path,
     images: list[tuple[str, Path]],
 ) -> dict[str, dict[str, Any]]:
-    """The variants table (label -> row) of every recorded run's evaluation; with more than
-    one, their symmetry cost and mouth corners plotted together (appended to ``images``)."""
+    """The variants table (label -> row) of every recorded run's evaluation by the current
+    code version; with more than one, their symmetry cost and mouth corners plotted together
+    (appended to ``images``)."""
     variants: dict[str, dict[str, Any]] = {}
     cost, mouth = {}, {}
     time = None
     for k in shown_variants(store, pipeline.upstream(spec.name)):
+        if store.provenance(spec.name, k).get("version") != spec.version:
+            continue  # written by another code version: another output layout
         label = variant_label(pipeline, store, k)
         group = store.open(spec.name, k)
         ev = read_dataclass(FaceEvaluation, group)
