@@ -13,10 +13,8 @@ import os
 import sys
 from pathlib import Path
 
-from pydantic import BaseModel
-
 from physanim.capture.params import DemoParams
-from physanim.pipeline import DatasetParams, Pipeline, PlanEntry
+from physanim.pipeline import Pipeline, PipelineConfig, PlanEntry
 from physanim.store import StageStore
 from physanim.store.stage_store import LATEST
 from tasks import (
@@ -38,7 +36,7 @@ from tasks import (
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
 
-def face_report(store: StageStore, entries: list[PlanEntry], config: BaseModel) -> Path | None:
+def face_report(store: StageStore, entries: list[PlanEntry], config: PipelineConfig) -> Path | None:
     """The face run's HTML report in ``<run dir>/report/`` (variants side by side).
 
     Rebuilt when a stage ran or the latest run changed since it was written, so a warm run
@@ -46,7 +44,7 @@ def face_report(store: StageStore, entries: list[PlanEntry], config: BaseModel) 
     """
     from physanim.render.run_report import write_run_report
 
-    dataset: DatasetParams = config.dataset  # type: ignore[attr-defined]
+    dataset = config.dataset
     out = dataset.run_dir / "report"
     index, pointer = out / "index.html", store.root / LATEST
     fresh = index.exists() and (

@@ -119,7 +119,7 @@ def compute(
     lm_vertices = name_index(fit.vertex_names, features)
     alignment = align_motion_mesh(
         fit.motion[0], fit.triangles, lm_vertices, scan_v, scan_f, scan_lms,
-        features.index("pronasale"), params, ctx.progress("align"),
+        int(name_index(features, ["pronasale"])[0]), params, ctx.progress("align"),
     )  # fmt: skip
     aligned = alignment.apply(fit.motion)
     # the lip seam: the fitted model's mouth slit, else the line through the mouth corners

@@ -11,10 +11,15 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel
 
 from physanim.capture.params import IngestParams
-from physanim.pipeline import DatasetParams, ProgressFactory, StageContext, StageSpec
+from physanim.pipeline import (
+    DatasetParams,
+    PipelineConfig,
+    ProgressFactory,
+    StageContext,
+    StageSpec,
+)
 
 
 @dataclass(frozen=True)
@@ -89,14 +94,14 @@ SPEC = StageSpec.typed(
 )
 
 
-def ensure_demo(config: BaseModel, progress: ProgressFactory | None = None) -> Path | None:
+def ensure_demo(config: PipelineConfig, progress: ProgressFactory | None = None) -> Path | None:
     """Generate the demo dataset when the config names ``demo`` and it has no recording yet.
 
     Returns the generated directory, or None when nothing had to be done.
     """
     from physanim.capture.demo import generate_demo
 
-    dataset: DatasetParams = config.dataset  # type: ignore[attr-defined]
+    dataset = config.dataset
     if dataset.name != "demo" or _has_recording(dataset.path):
         return None
     report = progress("demo dataset") if progress else None

@@ -76,6 +76,15 @@ class SimulateOutput:
     jaw: JawMotion | None = None
 
 
+#: the fields of SimulateOutput that come from ``physanim.fem.simulate``'s result
+RESULT_FIELDS = (
+    "displacements", "times", "kinetic", "strain", "dissipated", "max_von_mises",
+    "p99_von_mises", "inverted_count", "inverted_tets", "dt", "n_substeps", "timings",
+    "corot_iterations", "frame_substeps", "solver_threads", "check_steps",
+    "frames_over_tolerance",
+)  # fmt: skip
+
+
 def simulate_inputs(
     track: TrackOutput,
     align: AlignOutput,
@@ -119,41 +128,17 @@ def compute(
 ) -> SimulateOutput:
     """displacements (T,n,3) float32 m, energies (T,) J, von Mises max and 99th percentile
     (T,) Pa, the jaw's angle (T,) rad / pivot / axis, the driven and spring nodes."""
-    from physanim.fem.linsolve import blas_in_use
-    from physanim.fem.simulate import hot_spot_ratio, simulate
+    from physanim.face.performance import performance_summary
+    from physanim.fem.simulate import simulate
 
     args, drive = simulate_inputs(track, align, tetra, materials, params)
     result = simulate(**args, params=params, progress=ctx.progress("simulate"))
+    ctx.summary.update(
+        performance_summary(result, drive, int(tetra.skin.sum()), params, params.drive.mode)
+    )
     springs = drive.springs
-    n_skin = int(tetra.skin.sum())
-    summary: dict[str, Any] = {
-        "frames": len(result.displacements),
-        "dt_s": result.dt,
-        "substeps_per_frame": result.n_substeps,
-        "stepping": params.stepping,
-        "steps": int(result.frame_substeps.sum()),
-        "check_steps": result.check_steps,
-        "frames_over_tolerance": result.frames_over_tolerance,
-        "blas": blas_in_use(),
-        "solver_threads": sorted({int(t) for t in result.solver_threads[1:]}),
-        "drive": params.drive.mode,
-        "driving_landmarks": len(drive.landmarks),
-        "spring_node_fraction_of_skin": round(len(springs.nodes) / n_skin, 4) if springs else 0,
-        "max_displacement_mm": round(float(np.abs(result.displacements).max()) * 1e3, 3),
-        "peak_von_mises_kPa": round(float(result.max_von_mises.max()) / 1e3, 3),
-        "peak_to_p99_von_mises": round(hot_spot_ratio(result), 3),
-        "inverted_tets": int(len(result.inverted_tets)),
-        "seconds": {k: round(v, 3) for k, v in result.timings.items()},
-    }
-    if drive.jaw is not None:
-        summary["jaw_max_angle_deg"] = round(float(np.degrees(drive.jaw.angle.max())), 3)
-        summary["jaw_pivot_mm"] = [round(float(x) * 1e3, 2) for x in drive.jaw.pivot]
-    if drive.warnings:
-        summary["warnings"] = drive.warnings
-    ctx.summary.update(summary)
-    sim_fields = [f for f in SimulateOutput.__dataclass_fields__ if hasattr(result, f)]
     return SimulateOutput(
-        **{f: getattr(result, f) for f in sim_fields},
+        **{f: getattr(result, f) for f in RESULT_FIELDS},
         driven_nodes=drive.prescribed,
         bone_nodes=drive.bone,
         mandible_weight=drive.mandible_weight,

@@ -9,6 +9,7 @@ by the kinematic scan (``DriveParams.mode == "kinematic"``) or prescribed at sin
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +23,7 @@ from physanim.face.drive import (
     kinematic_targets,
 )
 from physanim.face.params import DriveParams, JawParams
+from physanim.fem.params import SimulateParams
 from physanim.mesh.seam import MouthLine, bind_across_seam
 
 
@@ -69,3 +71,40 @@ def performance_drive(
         nodes, tets, skin, bone, side, tissue["skin_anchor"], mouth, jaw_motion,
         landmark_names, rest, motion, drive, jaw.blend_m, targets,
     )  # fmt: skip
+
+
+def performance_summary(
+    result: Any, drive: FaceDrive, n_skin: int, params: SimulateParams, mode: str
+) -> dict[str, Any]:
+    """The simulate stage's summary of a ``physanim.fem.simulate`` result (mm, kPa, s):
+    stepping, solver, drive (``mode``, landmarks, share of the ``n_skin`` skin nodes held by
+    springs), peak displacement and stress, inverted tets, timings, the jaw, warnings."""
+    from physanim.fem.linsolve import blas_in_use
+    from physanim.fem.simulate import hot_spot_ratio
+
+    springs = drive.springs
+    summary: dict[str, Any] = {
+        "frames": len(result.displacements),
+        "dt_s": result.dt,
+        "substeps_per_frame": result.n_substeps,
+        "stepping": params.stepping,
+        "steps": int(result.frame_substeps.sum()),
+        "check_steps": result.check_steps,
+        "frames_over_tolerance": result.frames_over_tolerance,
+        "blas": blas_in_use(),
+        "solver_threads": sorted({int(t) for t in result.solver_threads[1:]}),
+        "drive": mode,
+        "driving_landmarks": len(drive.landmarks),
+        "spring_node_fraction_of_skin": round(len(springs.nodes) / n_skin, 4) if springs else 0,
+        "max_displacement_mm": round(float(np.abs(result.displacements).max()) * 1e3, 3),
+        "peak_von_mises_kPa": round(float(result.max_von_mises.max()) / 1e3, 3),
+        "peak_to_p99_von_mises": round(hot_spot_ratio(result), 3),
+        "inverted_tets": int(len(result.inverted_tets)),
+        "seconds": {k: round(v, 3) for k, v in result.timings.items()},
+    }
+    if drive.jaw is not None:
+        summary["jaw_max_angle_deg"] = round(float(np.degrees(drive.jaw.angle.max())), 3)
+        summary["jaw_pivot_mm"] = [round(float(x) * 1e3, 2) for x in drive.jaw.pivot]
+    if drive.warnings:
+        summary["warnings"] = drive.warnings
+    return summary

@@ -9,12 +9,13 @@ from physanim.pipeline.runner import (
     execute_stage,
     record_run,
 )
-from physanim.pipeline.spec import DatasetParams, Pipeline, StageSpec
+from physanim.pipeline.spec import DatasetParams, Pipeline, PipelineConfig, StageSpec
 
 __all__ = [
     "DatasetParams",
     "PlanEntry",
     "Pipeline",
+    "PipelineConfig",
     "ProgressFactory",
     "ProgressFn",
     "StageContext",

@@ -42,6 +42,14 @@ class DatasetParams(BaseModel):
         return self.store_path.parent
 
 
+class PipelineConfig(BaseModel):
+    """Base of every pipeline's config model (``Pipeline.config_model``): the ``dataset``
+    section is typed here, the stage sections are added per pipeline."""
+
+    model_config = ConfigDict(extra="forbid")
+    dataset: DatasetParams = Field(default_factory=DatasetParams)
+
+
 def dataset_overrides(dataset: str) -> list[str]:
     """``--set`` overrides selecting a dataset by name (``data/<name>``) or by directory."""
     p = Path(dataset)
@@ -158,9 +166,9 @@ class Pipeline:
     default_config: Path
     extra_sections: Mapping[str, type[BaseModel]] = field(default_factory=dict)
     #: called by ``run`` before planning, e.g. to generate a missing demo dataset
-    prepare: Callable[[BaseModel, Any], Any] | None = None
+    prepare: Callable[[PipelineConfig, Any], Any] | None = None
     #: called by ``run`` after the stages, (store, plan entries, config) -> report path | None
-    report: Callable[[Any, Any, BaseModel], Path | None] | None = None
+    report: Callable[[Any, Any, PipelineConfig], Path | None] | None = None
 
     def __post_init__(self) -> None:
         seen: set[str] = set()
@@ -208,16 +216,14 @@ class Pipeline:
                 out.update(s.upstream)
         return [s.name for s in self.stages if s.name in out]
 
-    def config_model(self) -> type[BaseModel]:
+    def config_model(self) -> type[PipelineConfig]:
         """Pydantic model of this pipeline's config: ``dataset`` plus one section per stage."""
-        sections: dict[str, Any] = {"dataset": (DatasetParams, DatasetParams())}
+        sections: dict[str, Any] = {}
         for name, model in self.extra_sections.items():
             sections[name] = (model, model())
         for s in self.stages:
             sections[s.name] = (s.params, s.params())
-        return create_model(
-            f"{self.name.title()}Config", __config__=ConfigDict(extra="forbid"), **sections
-        )
+        return create_model(f"{self.name.title()}Config", __base__=PipelineConfig, **sections)
 
     def edges(self) -> list[tuple[str, str, type | None]]:
         """(upstream, stage, output dataclass the edge carries; None: an untyped group)."""
