@@ -1,7 +1,4 @@
-"""Stage ``arm_render``: frames and MP4 of the arm per condition, plus comparison plots.
-
-Version 3: the list of ``videos`` is stored as an attribute of the output.
-"""
+"""Stage ``arm_render``: frames and MP4 of the arm per condition, plus comparison plots."""
 
 from __future__ import annotations
 
@@ -24,9 +21,7 @@ class ArmRenderParams(BaseModel):
 
 @dataclass(frozen=True)
 class ArmRenderOutput:
-    """The videos rendered (``<condition>/arm.mp4`` in files/, beside the plots)."""
-
-    videos: list[str]
+    """No arrays: the output is its files (``<condition>/arm.mp4`` and frames, the plots)."""
 
 
 def compute(
@@ -60,15 +55,14 @@ def compute(
     plot_muscle_timeseries(results, base.arm, out / "fibre_length.png", "fibre_length")
     plot_muscle_curves(out / "muscle_curves.png")
     plot_condition_summary(results, [lk.name for lk in base.arm.links], out / "conditions.png")
-    videos = sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))
-    ctx.summary["files"] = videos
-    return ArmRenderOutput(videos)
+    ctx.summary["files"] = sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))
+    return ArmRenderOutput()
 
 
 SPEC = StageSpec.typed(
     "arm_render",
     compute,
-    version="3",
+    version="2",
     doc="arm frames + MP4 per condition, activation / fibre-length plots",
     files={
         "activation.png": "Muscle activations per condition",

@@ -1,7 +1,4 @@
-"""Stage ``keyframe_render``: capsule-figure frames, MP4 and a joint-angle plot.
-
-Version 3: the list of files ``written`` is stored as an attribute of the output.
-"""
+"""Stage ``keyframe_render``: capsule-figure frames, MP4 and a joint-angle plot."""
 
 from __future__ import annotations
 
@@ -27,9 +24,7 @@ class KeyframeRenderParams(BaseModel):
 
 @dataclass(frozen=True)
 class KeyframeRenderOutput:
-    """The files written in files/ (frames, ``animation.mp4``, the joint-angle plot)."""
-
-    written: list[str]
+    """No arrays: the output is its files (frames, ``animation.mp4``, the joint-angle plot)."""
 
 
 def compute(
@@ -70,14 +65,13 @@ def compute(
         elevation=params.elevation_deg,
         progress=ctx.progress("render"),
     )
-    files = sorted(str(p.relative_to(ctx.files_dir)) for p in written.values())
-    ctx.summary["files"] = files
-    return KeyframeRenderOutput(files)
+    ctx.summary["files"] = sorted(str(p.relative_to(ctx.files_dir)) for p in written.values())
+    return KeyframeRenderOutput()
 
 
 SPEC = StageSpec.typed(
     "keyframe_render",
     compute,
-    version="3",
+    version="2",
     doc="capsule figure frames + MP4 + joint-angle plot",
 )

@@ -94,7 +94,8 @@ class StageSpec(Generic[P]):
     (sizes, mtimes, hashes) that the key must also depend on.  ``output``: the dataclass the
     stage stores (typed stages, built by :meth:`typed`), None for a stage that writes its
     group itself.  ``files``: plain files the stage writes in its ``files/`` folder that a
-    report shows, relative path -> caption (PNG figures, the MP4 video).
+    report shows, relative path -> caption (PNG figures, the MP4 video).  ``label``: names
+    the variant a params value makes, for reports comparing runs (e.g. the material model).
     """
 
     name: str

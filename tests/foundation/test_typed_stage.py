@@ -4,6 +4,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pytest
 from pydantic import BaseModel
 
 from physanim.pipeline import Pipeline, StageSpec, execute_plan_locally, make_plan
@@ -44,3 +45,23 @@ def test_toy_typed_stage_runs_through_the_runner_and_store(tmp_path):
     np.testing.assert_array_equal(out.values, [0.0, 3.0, 6.0, 9.0, 12.0])
     assert out.unit == "m" and TWO.stage("gain").inputs == {"ramp": Ramp}
     assert "ramp -->|Ramp| gain" in TWO.mermaid() and "<- ramp: Ramp(values, unit)" in TWO.text()
+
+
+def test_an_edge_whose_types_disagree_is_refused() -> None:
+    def wrong(params: GainParams, ramp: GainParams) -> Ramp: ...
+
+    def scaled(params: GainParams, ramp: Ramp) -> Scaled: ...
+
+    with pytest.raises(TypeError, match="ramp is annotated .*GainParams.*not a dataclass"):
+        StageSpec.typed("wrong", wrong, "1")
+    with pytest.raises(ValueError, match="total reads gain as Ramp, but gain stores Scaled"):
+        stages = (*STAGES[:1], StageSpec.typed("gain", scaled, "1"))
+        Pipeline("bad", (*stages, StageSpec.typed("total", total, "1")), Path("bad.yaml"))
+
+
+@dataclass(frozen=True)
+class Scaled:
+    values: np.ndarray
+
+
+def total(params: GainParams, gain: Ramp) -> Ramp: ...
