@@ -478,8 +478,8 @@ def check(
     set_: SetOpt = None,
 ) -> None:
     """Read a dataset's recording and print what it holds, or each problem and its fix."""
-    from physanim.capture.check import check_dataset
     from physanim.pipeline.progress import rich_progress
+    from physanim.tracking.dataset_check import check_dataset
 
     cfg = load(_pipeline("face"), config, set_, dataset)
     path, track = cfg.dataset.path, cfg.track  # type: ignore[attr-defined]

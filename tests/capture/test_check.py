@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 import pytest
 
-from physanim.capture.check import CheckReport, check_dataset
 from physanim.capture.params import IngestParams
+from physanim.tracking.dataset_check import CheckReport, check_dataset
 from physanim.tracking.params import TrackParams
 
 from .photo_dataset import FX, write_photo_dataset
