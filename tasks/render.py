@@ -46,7 +46,7 @@ class TileCache:
 
         import physanim.render.face as face
 
-        digest = hashlib.sha256(Path(face.__file__).read_bytes())  # the renderer's code too
+        digest = hashlib.sha256(b"".join(f.read_bytes() for f in face.CODE_FILES))  # its code too
         for name in sorted(job):
             if name != "progress":
                 value = job[name]
@@ -79,7 +79,9 @@ def compute(ctx: StageContext) -> None:
     from physanim.mesh.embed import embedding_matrix
     from physanim.mesh.kinematic import blend_frames
     from physanim.mesh.seam import MouthLine
-    from physanim.render.face import ColourMap, frontal_camera, render_sequence
+    from physanim.render.camera import frontal_camera
+    from physanim.render.colours import ColourMap
+    from physanim.render.face import render_sequence
     from physanim.render.panel import draw_landmarks, panel, write_mp4
     from physanim.render.plots import (
         plot_energies,
