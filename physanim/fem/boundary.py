@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from physanim.fem.geometry import node_dofs
 from physanim.mesh.seam import NONE
 
 
@@ -56,7 +57,7 @@ class SpringDrive:
 
     def dofs(self) -> NDArray:
         """DOF indices (3S,) of the driven nodes, interleaved x, y, z."""
-        return (3 * self.nodes[:, None] + np.arange(3)).ravel()
+        return node_dofs(self.nodes)
 
     def matrix(self, n_dofs: int) -> sp.csr_matrix:
         """(n_dofs, n_dofs) diagonal spring stiffness, N/m."""
