@@ -21,7 +21,8 @@ DOFs, SPD, no spurious zero-energy modes); the deviatoric viscosity needs no ave
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel, build_model
 from physanim.fem.params import SimulateParams
-from physanim.fem.simulate import SimResult, SimulationDiverged, simulate
+from physanim.fem.simulate import SimResult, simulate
+from physanim.fem.stepping import SimulationDiverged
 
 __all__ = [
     "FemModel",
