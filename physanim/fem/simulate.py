@@ -22,7 +22,7 @@ from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel, build_model
 from physanim.fem.monitors import EnergyMonitor, InversionMonitor, StressMonitor
 from physanim.fem.newmark import State
-from physanim.fem.numba_threads import faster_thread_count
+from physanim.fem.numba_threads import faster_thread_count, keeps_thread_count
 from physanim.fem.parallel_spmv import ParallelCSR
 from physanim.fem.params import SimulateParams
 from physanim.fem.statics import solve_static
@@ -77,6 +77,7 @@ def hot_spot_ratio(result: SimResult, min_fraction: float = 0.05) -> float:
     return float(np.max(vm[loaded] / np.maximum(p99[loaded], 1e-300)))
 
 
+@keeps_thread_count
 def simulate(
     nodes: np.ndarray,
     tets: np.ndarray,
@@ -98,34 +99,12 @@ def simulate(
     zero displacement. ``springs`` optionally pulls free nodes towards moving targets (soft
     constraints, same frame times and interpolation). All other nodes are free. The first
     frame is the static equilibrium for driven_traj[0] and the springs' first targets.
-    ``model`` may pass a prebuilt ``build_model`` result.
+    ``model`` may pass a prebuilt ``build_model`` result (e.g. another constitutive law or
+    element formulation: ``build_model(..., law=..., element=...)``).
 
     On cores busy with other processes one thread can beat all of numba's: the run uses the
     faster (checked before factorising and every 30 frames; ``SimResult.solver_threads``).
     """
-    most_threads = numba.get_num_threads()
-    try:
-        return _simulate(
-            nodes, tets, materials, driven_idx, driven_traj, frame_dt, fixed_idx, params,
-            progress, model, springs,
-        )  # fmt: skip
-    finally:
-        numba.set_num_threads(most_threads)
-
-
-def _simulate(
-    nodes: np.ndarray,
-    tets: np.ndarray,
-    materials: TetMaterials,
-    driven_idx: np.ndarray,
-    driven_traj: np.ndarray,
-    frame_dt: float,
-    fixed_idx: np.ndarray | None = None,
-    params: SimulateParams | None = None,
-    progress: Callable[[int, int], None] | None = None,
-    model: FemModel | None = None,
-    springs: SpringDrive | None = None,
-) -> SimResult:
     params = params or SimulateParams()
     t0 = time.perf_counter()
     model = model or build_model(nodes, tets, materials, params)
