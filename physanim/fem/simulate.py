@@ -21,12 +21,10 @@ from physanim.fem.kinematics import kinematics
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel, build_model
 from physanim.fem.monitors import EnergyMonitor, InversionMonitor, StressMonitor
-from physanim.fem.newmark import State
 from physanim.fem.numba_threads import faster_thread_count, keeps_thread_count
 from physanim.fem.parallel_spmv import ParallelCSR
 from physanim.fem.params import SimulateParams
-from physanim.fem.statics import solve_static
-from physanim.fem.stepping import FrameStepper, IntegratorCache, substep_levels
+from physanim.fem.stepping import FrameStepper, IntegratorCache, initial_state, substep_levels
 
 
 @dataclass
@@ -129,15 +127,7 @@ def simulate(
     force = bc.spring_force(integ.free)
     stepper = FrameStepper(integrators, levels, bc, force, params.error_tol_mm * 1e-3)
 
-    state = State.rest(model.n_dofs)
-    d_c, v_c, a_c = (x[0] for x in bc.prescribed(np.zeros(1)))
-    f0 = None if force is None else force.full(0.0, model.n_dofs)
-    loaded = f0 is not None and bool(np.any(f0))
-    if np.any(d_c) or loaded:
-        state.d[:] = solve_static(stiffness, pres, d_c, f0, solver=params.solver)
-    state.v[pres], state.a[pres] = v_c, a_c
-    if np.any(v_c) or np.any(a_c) or loaded:
-        integ.initial_acceleration(state, f0)
+    state = initial_state(integ, stiffness, bc, force, params.solver)
 
     out = np.zeros((n_frames, n_nodes, 3), dtype=np.float32)
     energy = EnergyMonitor(

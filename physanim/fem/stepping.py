@@ -1,4 +1,5 @@
-"""Newmark substeps between capture frames: fixed, or adaptive by step doubling.
+"""Newmark substeps between capture frames (fixed, or adaptive by step doubling) and the
+state they start from.
 
 Adaptive frames are computed from the same state in n and 2n substeps (n = 1, 2, 4, ...); the
 finer result is kept and its error estimated as |d_2n - d_n| / (r^2 - 1) (Richardson, second
@@ -13,10 +14,12 @@ import time
 from collections import OrderedDict
 
 import numpy as np
+import scipy.sparse as sp
 
 from physanim.fem.boundary import BoundaryConditions, SpringForce
 from physanim.fem.newmark import Newmark, State
 from physanim.fem.params import SimulateParams
+from physanim.fem.statics import solve_static
 
 
 class SimulationDiverged(RuntimeError):
@@ -30,6 +33,29 @@ def substep_levels(frame_dt: float, params: SimulateParams, adaptive_ok: bool) -
     if not (params.stepping == "adaptive" and adaptive_ok and n_max > 1):
         return [n_max]
     return sorted({min(2**i, n_max) for i in range(n_max.bit_length() + 1)})
+
+
+def initial_state(
+    integ: Newmark,
+    stiffness: sp.csr_matrix,
+    bc: BoundaryConditions,
+    force: SpringForce | None,
+    solver: str,
+) -> State:
+    """The state at frame 0: static equilibrium (``stiffness`` (n, n) N/m) for the first
+    prescribed displacements and spring forces, the prescribed velocity and acceleration,
+    and the free DOFs' acceleration from the equation of motion when anything moves."""
+    n_dofs, pres = stiffness.shape[0], bc.prescribed_dofs
+    state = State.rest(n_dofs)
+    d_c, v_c, a_c = (x[0] for x in bc.prescribed(np.zeros(1)))
+    f0 = None if force is None else force.full(0.0, n_dofs)
+    loaded = f0 is not None and bool(np.any(f0))
+    if np.any(d_c) or loaded:
+        state.d[:] = solve_static(stiffness, pres, d_c, f0, solver=solver)
+    state.v[pres], state.a[pres] = v_c, a_c
+    if np.any(v_c) or np.any(a_c) or loaded:
+        integ.initial_acceleration(state, f0)
+    return state
 
 
 class IntegratorCache:
