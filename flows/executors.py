@@ -1,8 +1,8 @@
 """Prefect and Dask executors (``physanim.pipeline.executor``): one Prefect task per job.
 
-``PrefectExecutor`` runs ``run_jobs`` (the one submit loop) inside a Prefect flow whose
-``submit`` is a Prefect task submission waiting for its upstream tasks, on Prefect's thread
-pool; ``DaskExecutor`` is the same flow with Dask's task runner, on a local cluster started for
+``PrefectExecutor`` runs ``run_jobs`` (the one submit loop) inside a Prefect flow run with
+``PrefectTasks`` as its Submitter (a Prefect task per job, waiting for its upstream tasks), on
+Prefect's thread pool; ``DaskExecutor`` is the same flow with Dask's task runner, on a local cluster started for
 the run or an existing one. Tasks pass store keys, never arrays: each writes its output to the
 stage store and returns a small StageResult. The Prefect API is the run directory's shared
 server (``prefect_env.shared_server``), or PREFECT_API_URL when it answers. Import this module
@@ -16,6 +16,7 @@ import os
 import socket
 import threading
 from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -57,16 +58,36 @@ def stage_task(
     return execute_stage(pipeline, config, job.entry, progress)
 
 
+@dataclass(frozen=True)
+class PrefectTasks:
+    """The Submitter inside the flow run: a Prefect task per job, run in ``cwd`` (picklable:
+    Dask sends it with the flow run's context), ``progress`` for stages run in this process."""
+
+    cwd: str
+    progress: ProgressFactory | None = None
+
+    def submit(self, pipeline: Pipeline, config: Any, job: Job, deps: list[Any]) -> PrefectFuture:
+        e = job.entry
+        named: Task = stage_task.with_options(name=e.stage, task_run_name=f"{e.stage}-{e.key[:8]}")
+        return named.submit(pipeline, config, job, self.cwd, self.progress, wait_for=deps)
+
+    def wait(self, handle: PrefectFuture) -> None:
+        handle.wait()
+
+    def result(self, handle: PrefectFuture) -> StageResult:
+        return handle.result()
+
+
 @flow(name="physanim", persist_result=False, validate_parameters=False)
 def jobs_flow(
-    executor: Executor,
+    tasks: PrefectTasks,
     pipeline: Pipeline,
     configs: Mapping[str, Any],
     jobs: list[Job],
     on_result: Callable[[StageResult], None] | None,
 ) -> list[Outcome]:
-    """The job graph as one flow run: ``run_jobs`` with ``executor`` submitting tasks."""
-    return run_jobs(executor, pipeline, configs, jobs, on_result)
+    """The job graph as one flow run: the submit loop, submitting Prefect tasks."""
+    return run_jobs(tasks, pipeline, configs, jobs, on_result)
 
 
 class PrefectExecutor(Executor):
@@ -111,18 +132,7 @@ class PrefectExecutor(Executor):
             if runner is None:
                 load_in_main_thread()  # before the task threads import them (physanim.native)
             named = jobs_flow.with_options(name=self.name, task_runner=runner)
-            return named(self, pipeline, configs, jobs, on_result)
-
-    def submit(self, pipeline: Pipeline, config: Any, job: Job, deps: list[Any]) -> PrefectFuture:
-        e = job.entry
-        named: Task = stage_task.with_options(name=e.stage, task_run_name=f"{e.stage}-{e.key[:8]}")
-        return named.submit(pipeline, config, job, self.cwd, self.progress, wait_for=deps)
-
-    def wait(self, handle: PrefectFuture) -> None:
-        handle.wait()
-
-    def result(self, handle: PrefectFuture) -> StageResult:
-        return handle.result()
+            return named(PrefectTasks(self.cwd, self.progress), pipeline, configs, jobs, on_result)
 
 
 class DaskExecutor(PrefectExecutor):

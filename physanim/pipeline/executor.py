@@ -1,11 +1,12 @@
 """Executors: one interface and one submit loop for every way physanim runs planned stages.
 
 A plan (one store) or a sweep (many stores) becomes a list of ``Job``s, each naming the jobs
-it waits for. An ``Executor`` starts one job (``submit``, given the handles of its upstream
-jobs), waits for it and returns its result; ``run_jobs`` is the only loop that submits a job
-graph and collects what became of each job. ``LocalExecutor`` runs the jobs in this process,
-in order; ``flows.executors`` adds Prefect (a task per job, threads) and Dask (the same tasks
-on a cluster). ``run_plan`` runs one store's plan with any executor and records the run.
+it waits for. An ``Executor`` runs such a list (``run``) and releases what it started
+(``close``); ``run_jobs`` is the only loop that submits a job graph and collects what became
+of each job, through a ``Submitter`` (how one job is started, given the handles of its
+upstream jobs, and awaited). ``LocalExecutor`` runs the jobs in this process, in order;
+``flows.executors`` adds Prefect (a task per job, on threads) and Dask (the same tasks on a
+cluster). ``run_plan`` runs one store's plan with any executor and records the run.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
-from typing import Any
+from typing import Any, Protocol
 
 from pydantic import BaseModel
 
@@ -68,32 +69,35 @@ def blocked(job: Job, outcomes: Mapping[Ident, object]) -> bool:
     return any(d in outcomes and not isinstance(outcomes[d], StageResult) for d in job.deps)
 
 
-class Executor:
-    """Runs a job graph; subclasses say how one job is started and awaited.
+class Submitter(Protocol):
+    """How one job is started and awaited: what ``run_jobs`` needs of an executor."""
 
-    ``run`` is the entry point (Prefect's executor wraps it in a flow); ``close`` releases
-    what ``run`` started (a cluster); executors are context managers that close on exit.
-    """
+    def submit(self, pipeline: Pipeline, config: Any, job: Job, deps: list[Any]) -> Any:
+        """Start ``job`` once the jobs behind the handles ``deps`` are done; its handle."""
+        ...
+
+    def wait(self, handle: Any) -> None:
+        """Wait until the job of ``handle`` has finished (or will never start)."""
+        ...
+
+    def result(self, handle: Any) -> StageResult:
+        """The result of a finished job; raises its error."""
+        ...
+
+
+class Executor:
+    """Runs a job graph: ``run`` submits the jobs through a Submitter with ``run_jobs``
+    (Prefect's executor does so inside a flow run); ``close`` releases what ``run`` started
+    (a cluster); executors are context managers that close on exit."""
 
     def run(
         self,
         pipeline: Pipeline,
-        configs: Mapping[str, BaseModel],
+        configs: Mapping[str, Any],
         jobs: list[Job],
         on_result: Callable[[StageResult], None] | None = None,
     ) -> list[Outcome]:
         """What became of each job (same order); ``configs``: variant -> config."""
-        return run_jobs(self, pipeline, configs, jobs, on_result)
-
-    def submit(self, pipeline: Pipeline, config: Any, job: Job, deps: list[Any]) -> Any:
-        """Start ``job`` once the jobs behind the handles ``deps`` are done; its handle."""
-        raise NotImplementedError
-
-    def wait(self, handle: Any) -> None:
-        """Wait until the job of ``handle`` has finished (or will never start)."""
-
-    def result(self, handle: Any) -> StageResult:
-        """The result of a finished job; raises its error."""
         raise NotImplementedError
 
     def close(self) -> None:
@@ -107,7 +111,7 @@ class Executor:
 
 
 def run_jobs(
-    executor: Executor,
+    executor: Submitter,
     pipeline: Pipeline,
     configs: Mapping[str, Any],
     jobs: list[Job],
@@ -146,10 +150,22 @@ class LocalExecutor(Executor):
     def __init__(self, progress: ProgressFactory | None = None) -> None:
         self.progress = progress
 
+    def run(
+        self,
+        pipeline: Pipeline,
+        configs: Mapping[str, Any],
+        jobs: list[Job],
+        on_result: Callable[[StageResult], None] | None = None,
+    ) -> list[Outcome]:
+        return run_jobs(self, pipeline, configs, jobs, on_result)
+
     def submit(
         self, pipeline: Pipeline, config: Any, job: Job, deps: list[Any]
     ) -> Callable[[], StageResult]:
         return partial(execute_stage, pipeline, config, job.entry, self.progress)
+
+    def wait(self, handle: Callable[[], StageResult]) -> None:
+        """Nothing to wait for: the job runs in ``result``."""
 
     def result(self, handle: Callable[[], StageResult]) -> StageResult:
         return handle()
