@@ -18,6 +18,7 @@ import subprocess
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -274,6 +275,25 @@ def verify(target: Target) -> None:
         raise typer.Exit(1)
 
 
+def _dag_text(d: Pipeline) -> str:
+    """One line a stage: name, code version, the stages it reads, what it does."""
+    return "".join(
+        f"{s.name} (v{s.version})"
+        + (f" <- {', '.join(s.upstream)}" if s.upstream else "")
+        + (f": {s.doc}" if s.doc else "")
+        + "\n"
+        for s in d.stages
+    )
+
+
+#: ``physanim dag --format``: name -> the text of a pipeline in that format
+DAG_FORMATS: dict[str, Callable[[Pipeline], str]] = {
+    "text": _dag_text,
+    "mermaid": Pipeline.mermaid,
+    "dot": Pipeline.dot,
+}
+
+
 @app.command()
 def dag(
     pipeline: PipelineOpt = "face",
@@ -282,20 +302,9 @@ def dag(
 ) -> None:
     """Print the DAG (text), or write it as Mermaid or Graphviz text."""
     d = get_pipeline(pipeline)
-    if fmt == "mermaid":
-        text = d.mermaid()
-    elif fmt == "dot":
-        text = d.dot()
-    elif fmt == "text":
-        text = "".join(
-            f"{s.name} (v{s.version})"
-            + (f" <- {', '.join(s.upstream)}" if s.upstream else "")
-            + (f": {s.doc}" if s.doc else "")
-            + "\n"
-            for s in d.stages
-        )
-    else:
-        raise typer.BadParameter(f"--format must be text, mermaid or dot, not {fmt!r}")
+    if fmt not in DAG_FORMATS:
+        raise typer.BadParameter(f"--format must be {', '.join(DAG_FORMATS)}, not {fmt!r}")
+    text = DAG_FORMATS[fmt](d)
     if output:
         output.write_text(text)
         console.print(f"wrote {output}")
