@@ -1,12 +1,12 @@
 """Prefect and Dask executors (``physanim.pipeline.executor``): one Prefect task per job.
 
 ``PrefectExecutor`` runs ``run_jobs`` (the one submit loop) inside a Prefect flow run with
-``PrefectTasks`` as its Submitter (a Prefect task per job, waiting for its upstream tasks), on
-Prefect's thread pool; ``DaskExecutor`` is the same flow with Dask's task runner, on a local cluster started for
-the run or an existing one. Tasks pass store keys, never arrays: each writes its output to the
-stage store and returns a small StageResult. The Prefect API is the run directory's shared
-server (``prefect_env.shared_server``), or PREFECT_API_URL when it answers. Import this module
-only after ``prefect_env.configure``.
+``PrefectTasks`` as its Submitter (a Prefect task per job, waiting for its upstream tasks),
+on Prefect's thread pool; ``DaskExecutor`` is the same flow with Dask's task runner, on a
+local cluster started for the run or an existing one. Tasks pass store keys, never arrays:
+each writes its output to the stage store and returns a small StageResult. The Prefect API is
+the run directory's shared server (``prefect_env.shared_server``), or PREFECT_API_URL when it
+answers. Import this module only after ``prefect_env.configure``.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import contextlib
 import os
 import socket
 import threading
-from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,7 @@ from flows.dask_cluster import LocalDask, check_workers, connect, worker_thread_
 from flows.prefect_env import shared_server
 from physanim.native import load_in_main_thread
 from physanim.pipeline import Executor, Job, Pipeline, ProgressFactory, StageResult, run_jobs
-from physanim.pipeline.executor import Outcome
+from physanim.pipeline.executor import JobGraph, OnResult, Outcome
 from physanim.pipeline.runner import execute_stage
 
 
@@ -79,15 +79,9 @@ class PrefectTasks:
 
 
 @flow(name="physanim", persist_result=False, validate_parameters=False)
-def jobs_flow(
-    tasks: PrefectTasks,
-    pipeline: Pipeline,
-    configs: Mapping[str, Any],
-    jobs: list[Job],
-    on_result: Callable[[StageResult], None] | None,
-) -> list[Outcome]:
+def jobs_flow(tasks: PrefectTasks, graph: JobGraph, on_result: OnResult) -> list[Outcome]:
     """The job graph as one flow run: the submit loop, submitting Prefect tasks."""
-    return run_jobs(tasks, pipeline, configs, jobs, on_result)
+    return run_jobs(tasks, graph, on_result)
 
 
 class PrefectExecutor(Executor):
@@ -120,19 +114,13 @@ class PrefectExecutor(Executor):
         """The flow's task runner (None: Prefect's thread pool)."""
         return None
 
-    def run(
-        self,
-        pipeline: Pipeline,
-        configs: Mapping[str, Any],
-        jobs: list[Job],
-        on_result: Callable[[StageResult], None] | None = None,
-    ) -> list[Outcome]:
+    def run(self, graph: JobGraph, on_result: OnResult = None) -> list[Outcome]:
         with self.api() as url:
             runner = self.task_runner(url)
             if runner is None:
                 load_in_main_thread()  # before the task threads import them (physanim.native)
             named = jobs_flow.with_options(name=self.name, task_runner=runner)
-            return named(PrefectTasks(self.cwd, self.progress), pipeline, configs, jobs, on_result)
+            return named(PrefectTasks(self.cwd, self.progress), graph, on_result)
 
 
 class DaskExecutor(PrefectExecutor):
@@ -157,22 +145,16 @@ class DaskExecutor(PrefectExecutor):
         self._client: Client | None = None
         self._closing: threading.Thread | None = None
 
-    def run(
-        self,
-        pipeline: Pipeline,
-        configs: Mapping[str, Any],
-        jobs: list[Job],
-        on_result: Callable[[StageResult], None] | None = None,
-    ) -> list[Outcome]:
+    def run(self, graph: JobGraph, on_result: OnResult = None) -> list[Outcome]:
         self.scratch.mkdir(parents=True, exist_ok=True)
         os.environ.setdefault("DASK_TEMPORARY_DIRECTORY", str(self.scratch))
         env = worker_thread_env(self.workers, per_worker=self.worker_threads)
         # the cluster comes up (in the background) while Prefect's server does
         self._local = None if self.address else LocalDask(self.workers, self.scratch, env)
         self._client = connect(self.address) if self.address else None
-        dumped = {k: _plain(c) for k, c in configs.items()}  # the workers re-validate them
+        dumped = {k: _plain(c) for k, c in graph.configs.items()}  # the workers re-validate
         try:
-            outcomes = super().run(pipeline, dumped, jobs, on_result)
+            outcomes = super().run(replace(graph, configs=dumped), on_result)
         except BaseException:
             if self._local is not None:
                 self._local.close_in_background().join()

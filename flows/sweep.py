@@ -62,7 +62,7 @@ def run_sweep(
         )
     )
     with executor:  # a local cluster closes while the report is written
-        outcomes = executor.run(plan.pipeline, plan.configs, plan.jobs) if plan.jobs else []
+        outcomes = executor.run(plan.graph) if plan.jobs else []
         seconds = time.perf_counter() - t0
         results = [o for o in outcomes if isinstance(o, StageResult)]
         failed = {

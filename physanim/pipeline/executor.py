@@ -28,6 +28,8 @@ from physanim.store import StageStore
 Ident = tuple[str, str, str]
 #: What became of one job: its result, its error, or None (an upstream job failed)
 Outcome = StageResult | BaseException | None
+#: Called with each result as it is collected
+OnResult = Callable[[StageResult], None] | None
 #: The variant name of a plain run's jobs (a sweep names its variants)
 RUN = "run"
 
@@ -64,6 +66,16 @@ def merge_plans(plans: Mapping[str, tuple[str, list[PlanEntry]]]) -> list[Job]:
     return list(jobs.values())
 
 
+@dataclass(frozen=True)
+class JobGraph:
+    """What an executor runs: the pipeline, each variant's config (name -> validated config,
+    or its plain dict on Dask) and the jobs, deps first."""
+
+    pipeline: Pipeline
+    configs: Mapping[str, Any]
+    jobs: list[Job]
+
+
 def blocked(job: Job, outcomes: Mapping[Ident, object]) -> bool:
     """True when an upstream job of ``job`` ran in this graph and did not succeed."""
     return any(d in outcomes and not isinstance(outcomes[d], StageResult) for d in job.deps)
@@ -90,14 +102,8 @@ class Executor:
     (Prefect's executor does so inside a flow run); ``close`` releases what ``run`` started
     (a cluster); executors are context managers that close on exit."""
 
-    def run(
-        self,
-        pipeline: Pipeline,
-        configs: Mapping[str, Any],
-        jobs: list[Job],
-        on_result: Callable[[StageResult], None] | None = None,
-    ) -> list[Outcome]:
-        """What became of each job (same order); ``configs``: variant -> config."""
+    def run(self, graph: JobGraph, on_result: OnResult = None) -> list[Outcome]:
+        """What became of each job of ``graph`` (same order); ``on_result`` sees each result."""
         raise NotImplementedError
 
     def close(self) -> None:
@@ -110,37 +116,32 @@ class Executor:
         self.close()
 
 
-def run_jobs(
-    executor: Submitter,
-    pipeline: Pipeline,
-    configs: Mapping[str, Any],
-    jobs: list[Job],
-    on_result: Callable[[StageResult], None] | None = None,
-) -> list[Outcome]:
+def run_jobs(submitter: Submitter, graph: JobGraph, on_result: OnResult = None) -> list[Outcome]:
     """The submit loop: submit every job after its upstream jobs, then collect them in order.
 
     A failed job fails only the jobs downstream of it (outcome None); the others run to the
     end. ``on_result`` sees each result as it is collected.
     """
     handles: dict[Ident, Any] = {}
-    for job in jobs:
+    for job in graph.jobs:
         deps = [handles[d] for d in job.deps if d in handles]
-        handles[job.ident] = executor.submit(pipeline, configs[job.variant], job, deps)
+        config = graph.configs[job.variant]
+        handles[job.ident] = submitter.submit(graph.pipeline, config, job, deps)
     outcomes: dict[Ident, Outcome] = {}
-    for job in jobs:  # deps come first
-        executor.wait(handles[job.ident])
+    for job in graph.jobs:  # deps come first
+        submitter.wait(handles[job.ident])
         if blocked(job, outcomes):
             outcomes[job.ident] = None
             continue
         try:
-            result = executor.result(handles[job.ident])
+            result = submitter.result(handles[job.ident])
         except Exception as exc:  # the stage's error, or a worker lost too often (KilledWorker)
             outcomes[job.ident] = exc
             continue
         outcomes[job.ident] = result
         if on_result is not None:
             on_result(result)
-    return [outcomes[job.ident] for job in jobs]
+    return [outcomes[job.ident] for job in graph.jobs]
 
 
 class LocalExecutor(Executor):
@@ -150,14 +151,8 @@ class LocalExecutor(Executor):
     def __init__(self, progress: ProgressFactory | None = None) -> None:
         self.progress = progress
 
-    def run(
-        self,
-        pipeline: Pipeline,
-        configs: Mapping[str, Any],
-        jobs: list[Job],
-        on_result: Callable[[StageResult], None] | None = None,
-    ) -> list[Outcome]:
-        return run_jobs(self, pipeline, configs, jobs, on_result)
+    def run(self, graph: JobGraph, on_result: OnResult = None) -> list[Outcome]:
+        return run_jobs(self, graph, on_result)
 
     def submit(
         self, pipeline: Pipeline, config: Any, job: Job, deps: list[Any]
@@ -176,7 +171,7 @@ def run_plan(
     pipeline: Pipeline,
     config: BaseModel,
     entries: list[PlanEntry],
-    on_result: Callable[[StageResult], None] | None = None,
+    on_result: OnResult = None,
     info: Mapping[str, Any] | None = None,
 ) -> list[StageResult]:
     """Run one store's plan with ``executor`` and record it as the latest run (also when a
@@ -190,8 +185,8 @@ def run_plan(
     ]
     for r in cached if on_result is not None else ():
         on_result(r)
-    jobs = merge_plans({RUN: (str(store.root), entries)})
-    outcomes = executor.run(pipeline, {RUN: config}, jobs, on_result) if jobs else []
+    graph = JobGraph(pipeline, {RUN: config}, merge_plans({RUN: (str(store.root), entries)}))
+    outcomes = executor.run(graph, on_result) if graph.jobs else []
     errors = [o for o in outcomes if isinstance(o, BaseException)]
     if all(isinstance(e, StageFailed) for e in errors):
         record_run(store, pipeline, {e.stage: e.key for e in entries}, info)
@@ -206,7 +201,7 @@ def execute_plan_locally(
     config: BaseModel,
     entries: list[PlanEntry],
     progress: ProgressFactory | None = None,
-    on_result: Callable[[StageResult], None] | None = None,
+    on_result: OnResult = None,
     info: Mapping[str, Any] | None = None,
 ) -> list[StageResult]:
     """``run_plan`` in this process, without Prefect (tests, debugging, ``--local``)."""

@@ -28,7 +28,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from physanim.config.loader import ConfigError, load_config, merge_sources, validate
-from physanim.pipeline.executor import Ident, Job, merge_plans
+from physanim.pipeline.executor import Ident, Job, JobGraph, merge_plans
 from physanim.pipeline.plan import PlanEntry, make_plan
 from physanim.pipeline.spec import Pipeline, dataset_overrides
 from physanim.store import StageStore
@@ -109,6 +109,11 @@ class SweepPlan:
     stores: dict[str, str]
     keys: dict[str, dict[str, str]]
     jobs: list[Job]
+
+    @property
+    def graph(self) -> JobGraph:
+        """The jobs as an executor runs them."""
+        return JobGraph(self.pipeline, self.configs, self.jobs)
 
     @property
     def run_dir(self) -> Path:
