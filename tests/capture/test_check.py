@@ -61,7 +61,7 @@ def test_cli_on_a_real_photo_dataset_and_a_broken_one() -> None:
                 [
                     sys.executable,
                     "-m",
-                    "physanim",
+                    "cli",
                     "check",
                     f"{rel}/{name}",
                     "--set",

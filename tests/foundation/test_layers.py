@@ -25,10 +25,7 @@ LAYERS: list[set[str]] = [
     {"tracking"},  # tracking backends (use the face model's landmarks)
     {"evaluate", "render"},
 ]
-FORBIDDEN = ("prefect", "flows", "tasks")
-# physanim/cli.py imports ``flows``; it is being moved out of the library (issue #22, the
-# CLI above flows) and will be deleted; __main__ only runs it
-EXCLUDED = {"physanim.cli", "physanim.__main__"}
+FORBIDDEN = ("prefect", "flows", "tasks", "cli")
 
 
 def _module_name(path: Path) -> str:
@@ -74,8 +71,6 @@ def _graph() -> tuple[dict[str, set[str]], dict[str, set[str]]]:
     known = _modules()
     internal, external = {}, {}
     for name, path in known.items():
-        if name in EXCLUDED:
-            continue
         imports = _imports(path, name, known)
         internal[name] = {m for m in imports if m in known and m != name}
         external[name] = {m.split(".")[0] for m in imports if m not in known}
