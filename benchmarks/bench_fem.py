@@ -25,6 +25,7 @@ from threadpoolctl import threadpool_limits
 
 from flows.dags import FACE
 from physanim.config import load_config
+from physanim.fem.geometry import node_dofs
 from physanim.fem.linsolve import CholmodFactors, blas_in_use
 from physanim.fem.model import build_model
 from physanim.fem.newmark import Newmark, State
@@ -44,7 +45,7 @@ def demo_inputs() -> tuple[dict[str, Any], SimulateStageParams]:
     with rich_progress() as progress:
         if FACE.prepare is not None:
             FACE.prepare(config, progress)
-        store = StageStore(config.dataset.store_path)  # type: ignore[attr-defined]
+        store = StageStore(config.dataset.store_path)
         plan = [e for e in make_plan(FACE, config, store) if e.stage in needed]
         if any(e.action == "run" for e in plan):
             print("computing the demo's " + ", ".join(e.stage for e in plan if e.action == "run"))
@@ -113,7 +114,7 @@ def compare_factorizations(sim: dict[str, Any], repeats: int) -> None:
     analysis, up to a ready solver: supernodal LL^T of A_uu (default, BLAS-3) and simplicial
     LDL^T of the sparser augmented matrix (the previous default)."""
     model = build_model(sim["nodes"], sim["tets"], sim["materials"])
-    pres = (3 * sim["driven_idx"][:, None] + np.arange(3)).ravel()
+    pres = node_dofs(sim["driven_idx"])
     ks = sim["springs"].matrix(model.n_dofs)
     nm = Newmark(model.K + ks, model.M, model.C, sim["frame_dt"], pres)
     h, u = nm.dt, nm.free
@@ -158,7 +159,7 @@ def main() -> None:
     )
     compare_stepping(sim, params, args.repeats)
     compare_factorizations(sim, args.repeats)
-    pres = (3 * driven[:, None] + np.arange(3)).ravel()
+    pres = node_dofs(driven)
     dt = params.dt
 
     all_threads = numba.get_num_threads()

@@ -22,10 +22,10 @@ from physanim.capture.markers import place_markers
 from physanim.capture.performance import AnalyticFaceField, demo_performance
 from physanim.face.landmarks import FEATURE_POINTS
 from physanim.face.model import load_face_model
+from physanim.fem.region_materials import tet_materials
 from physanim.mesh.align import align_motion_mesh
 from physanim.mesh.binding import bind_points, closest_points_on_triangles
 from physanim.mesh.kinematic import animate_bound_points
-from physanim.mesh.materials import tet_materials
 from physanim.mesh.params import AlignParams, MaterialModel, MaterialsParams, TetraParams
 from physanim.mesh.regions import LABEL_NAMES, plot_regions, region_areas, skin_regions, tet_regions
 from physanim.mesh.remesh import prepare_scan

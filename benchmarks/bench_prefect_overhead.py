@@ -8,6 +8,7 @@ then whole ``physanim run`` commands: ``--local``, the first Prefect run of a ru
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
@@ -21,7 +22,7 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict
 
 from physanim.config import load_config
-from physanim.pipeline import Pipeline, StageSpec, execute_plan_locally, make_plan
+from physanim.pipeline import Pipeline, StageSpec, execute_plan_locally, make_plan, run_plan
 from physanim.store import StageStore
 
 NAMES = ("ingest", "track", "fit", "align", "tetra", "materials", "simulate", "evaluate", "render")
@@ -59,7 +60,7 @@ def cli_runs(repeats: int = 3) -> None:
             cmd = [
                 sys.executable,
                 "-m",
-                "physanim",
+                "cli",
                 "run",
                 "-p",
                 "benchmarks.bench_prefect_overhead:NOOP",
@@ -102,10 +103,11 @@ def main() -> None:
         from flows.prefect_env import configure
 
         configure(Path(tmp) / "data" / "runs")
-        from flows.pipeline_flow import pipeline_flow
+        from flows.executors import PrefectExecutor  # no home: Prefect's temporary server
 
-        first = timed(pipeline_flow, 1)
-        second = timed(pipeline_flow, 2)
+        in_prefect = functools.partial(run_plan, PrefectExecutor(None, name="physanim-noop"))
+        first = timed(in_prefect, 1)
+        second = timed(in_prefect, 2)
     print(f"no-op DAG of {len(NAMES)} stages, python {sys.version.split()[0]}")
     print(f"  local runner           : {local:6.2f} s")
     print(f"  prefect, first flow run: {first:6.2f} s  (overhead {first - local:5.2f} s)")

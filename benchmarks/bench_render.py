@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from physanim.capture.actor import build_actor
-from physanim.render.face import ColourMap, render_sequence
+from physanim.render.colours import ColourMap
+from physanim.render.face import render_sequence
 from physanim.render.panel import panel, write_mp4
 
 

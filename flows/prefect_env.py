@@ -57,7 +57,8 @@ def configure(run_dir: Path) -> Path:
     return home
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free now (for a server started next)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -82,7 +83,7 @@ def prefect_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple
     if existing and _healthy(existing):
         yield existing, False
         return
-    port = _free_port()
+    port = free_port()
     url = f"http://127.0.0.1:{port}/api"
     cmd, env = _server_command(home, port)
     log = (home / "server.log").open("w")
@@ -183,7 +184,7 @@ def _idle_seconds() -> float:
 def _supervise(home: Path) -> None:
     """Run a Prefect server for ``home`` until it is idle (see ``shared_server``)."""
     idle_s = _idle_seconds()
-    port = _free_port()
+    port = free_port()
     url = f"http://127.0.0.1:{port}/api"
     cmd, env = _server_command(home, port)
     with (home / "server.log").open("w") as log:

@@ -3,7 +3,8 @@
 ``serve`` needs a real Prefect API server (Prefect refuses to schedule on its temporary one);
 ``prefect_env.prefect_server`` provides it.  Each scheduled run scans the folder; every
 sub-directory is a dataset.  Because outputs are content-addressed, datasets that did not
-change are pure cache hits, and new or changed ones run.
+change are pure cache hits, and new or changed ones run, each as a flow run of its own whose
+tasks are its stages (``flows.executors.PrefectExecutor``).
 Import only after ``prefect_env.configure``.
 """
 
@@ -14,8 +15,9 @@ from pathlib import Path
 from prefect import flow, get_run_logger
 
 from flows.dags import get_pipeline
+from flows.executors import PrefectExecutor
 from physanim.config import ConfigError, load_config
-from physanim.pipeline import execute_plan_locally, make_plan
+from physanim.pipeline import StageFailed, make_plan, run_plan
 from physanim.pipeline.spec import dataset_overrides
 from physanim.store import StageStore
 
@@ -38,11 +40,12 @@ def batch_flow(
                 dataset_overrides(str(d)),
             )
             store = StageStore(cfg.dataset.store_path)  # type: ignore[attr-defined]
-            store.remove_stale_temporaries()
-            results = execute_plan_locally(dag, cfg, make_plan(dag, cfg, store))
+            executor = PrefectExecutor(None, name=f"physanim-{dag.name}-{d.name}")
+            results = run_plan(executor, dag, cfg, make_plan(dag, cfg, store))
             ran = [r.stage for r in results if r.action == "ran"]
             outcome[d.name] = f"ran {', '.join(ran)}" if ran else "up to date"
-        except (ConfigError, ValueError, OSError) as exc:  # one bad dataset must not stop a batch
+        except (ConfigError, ValueError, OSError, StageFailed) as exc:  # one bad dataset
+            # (or a stage failing on it) must not stop a batch
             outcome[d.name] = f"failed: {exc}"
             log.error("dataset %s failed: %s", d.name, exc)
             continue

@@ -16,4 +16,4 @@ from physanim.native import load_in_main_thread
 def dask_setup(worker: Any) -> None:
     """Called by Dask in the worker's main thread (event loop) when the worker starts."""
     load_in_main_thread()
-    import flows.sweep  # noqa: F401  (imports prefect, prefect_dask and the pipeline)
+    import flows.executors  # noqa: F401  (imports prefect, prefect_dask and the pipeline)

@@ -60,7 +60,7 @@ def compute(
     ctx: StageContext[MaterialsStageParams],
 ) -> MaterialsOutput:
     """skin_labels (n_skin,), tet_labels (m,), E Pa, nu, eta Pa s, rho kg/m^3 per tet; PNG."""
-    from physanim.mesh.materials import tet_materials
+    from physanim.fem.region_materials import tet_materials
     from physanim.mesh.params import REGION_NAMES
     from physanim.mesh.regions import plot_regions, region_areas, skin_regions, tet_regions
 

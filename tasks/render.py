@@ -74,7 +74,7 @@ class TileCache:
 
         import physanim.render.face as face
 
-        digest = hashlib.sha256(Path(face.__file__).read_bytes())  # the renderer's code too
+        digest = hashlib.sha256(b"".join(f.read_bytes() for f in face.CODE_FILES))  # its code too
         for name in sorted(job):
             if name != "progress":
                 value = job[name]
@@ -115,8 +115,10 @@ def compute(
 
     from physanim.mesh.embed import embedding_matrix
     from physanim.mesh.kinematic import blend_frames
+    from physanim.render.camera import frontal_camera
+    from physanim.render.colours import ColourMap
     from physanim.render.crop import face_crop
-    from physanim.render.face import ColourMap, frontal_camera, render_sequence
+    from physanim.render.face import render_sequence
     from physanim.render.panel import draw_landmarks, panel, write_mp4
     from physanim.render.plots import (
         plot_energies,

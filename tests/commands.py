@@ -23,7 +23,7 @@ def physanim(
 ) -> subprocess.CompletedProcess[str]:
     """``physanim ARGS`` run in the repository root; stdout and stderr captured (text)."""
     return subprocess.run(
-        [sys.executable, "-m", "physanim", *args],
+        [sys.executable, "-m", "cli", *args],
         cwd=ROOT,
         env=env or physanim_env(),
         capture_output=True,
@@ -36,7 +36,7 @@ def physanim(
 def start(*args: str, env: dict[str, str] | None = None, **popen) -> subprocess.Popen[str]:
     """``physanim ARGS`` started in the background in the repository root (output piped)."""
     return subprocess.Popen(
-        [sys.executable, "-m", "physanim", *args],
+        [sys.executable, "-m", "cli", *args],
         cwd=ROOT,
         env=env or physanim_env(),
         stdout=subprocess.PIPE,
@@ -52,7 +52,7 @@ def invoke(*args: str) -> subprocess.CompletedProcess[str]:
     propagate."""
     from typer.testing import CliRunner
 
-    from physanim.cli import app
+    from cli.app import app
 
     cwd = os.getcwd()
     os.chdir(ROOT)

@@ -24,7 +24,7 @@ from physanim.face.landmarks import FEATURE_POINTS
 from physanim.face.model import FaceModel, pose_matrix
 from physanim.face.params import FitParams
 from physanim.mesh.binding import bind_points
-from physanim.tracking.similarity import fit_transform
+from physanim.transforms import fit_transform
 
 
 @dataclass(frozen=True)

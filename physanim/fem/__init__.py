@@ -1,8 +1,11 @@
 """Viscoelastic tetrahedral FEM dynamics (SPEC section 1, stage 7).
 
 Entry point: ``simulate(nodes, tets, materials, driven_idx, driven_traj, frame_dt, fixed_idx,
-params)`` -> ``SimResult``. Lower level: ``build_model`` (K, M, C), ``Newmark``,
-``CorotationalNewmark``, ``solve_static``.
+params)`` -> ``SimResult``. Lower level: ``build_model`` (K, M, C from an element formulation,
+``elements``, and a constitutive law, ``laws``), ``Newmark``, ``CorotationalNewmark``,
+``solve_static``. ``simulate`` composes ``boundary`` (driven / fixed nodes, springs),
+``kinematics`` (linear / corotational), ``stepping`` (adaptive Newmark between frames) and
+``monitors`` (energy, stress, inversion per frame).
 
 Element formulations (``SimulateParams.formulation``), thick-walled cylinder under internal
 pressure (plane strain, quarter section, b/a = 2), computed / Lame inner displacement:
@@ -21,7 +24,8 @@ DOFs, SPD, no spurious zero-energy modes); the deviatoric viscosity needs no ave
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel, build_model
 from physanim.fem.params import SimulateParams
-from physanim.fem.simulate import SimResult, SimulationDiverged, simulate
+from physanim.fem.simulate import SimResult, simulate
+from physanim.fem.stepping import SimulationDiverged
 
 __all__ = [
     "FemModel",

@@ -11,7 +11,8 @@ import scipy.sparse as sp
 
 from physanim.fem.geometry import element_dofs
 
-_M_VOIGT = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+#: Voigt form m of the identity: m . eps = tr(eps), the volumetric strain
+M_VOIGT = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
 
 
 def strain_displacement(grads: np.ndarray) -> np.ndarray:
@@ -42,8 +43,13 @@ def deviatoric_matrix(coef: np.ndarray, normal: float = 2.0) -> np.ndarray:
     deviatoric elasticity for coef = mu, the Kelvin-Voigt viscosity for coef = eta.
     With a = 1 and coef = eta it is the seed's C' (SPEC eq 4.26).
     """
-    base = np.diag([normal] * 3 + [1.0] * 3) - (normal / 3.0) * np.outer(_M_VOIGT, _M_VOIGT)
+    base = np.diag([normal] * 3 + [1.0] * 3) - (normal / 3.0) * np.outer(M_VOIGT, M_VOIGT)
     return coef[:, None, None] * base
+
+
+def volumetric_matrix(coef: np.ndarray) -> np.ndarray:
+    """Voigt matrices (M, 6, 6): coef m m^T (coef = kappa: the volumetric elasticity)."""
+    return coef[:, None, None] * np.outer(M_VOIGT, M_VOIGT)
 
 
 def element_blocks(B: np.ndarray, volumes: np.ndarray, D: np.ndarray) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""Soft drives of the FEM skin: springs that pull nodes towards moving targets.
+"""Boundary conditions of the FEM: driven and fixed nodes (:class:`BoundaryConditions`) and
+soft drives of the skin, springs that pull nodes towards moving targets.
 
 A :class:`SpringDrive` adds, for each listed node i, the energy ``k_i / 2 |d_i - u_i(t)|^2``:
 a constant diagonal stiffness (so the Newmark matrix is still factorised once) and a
@@ -20,6 +21,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from physanim.fem.geometry import node_dofs
+from physanim.fem.interp import catmull_rom
 from physanim.mesh.seam import NONE
 
 
@@ -56,13 +59,147 @@ class SpringDrive:
 
     def dofs(self) -> NDArray:
         """DOF indices (3S,) of the driven nodes, interleaved x, y, z."""
-        return (3 * self.nodes[:, None] + np.arange(3)).ravel()
+        return node_dofs(self.nodes)
 
     def matrix(self, n_dofs: int) -> sp.csr_matrix:
         """(n_dofs, n_dofs) diagonal spring stiffness, N/m."""
         diag = np.zeros(n_dofs)
         diag[self.dofs()] = np.repeat(self.stiffness, 3)
         return sp.diags(diag, format="csr")
+
+
+def _node_index(name: str, idx: NDArray | None, n_nodes: int) -> NDArray:
+    idx = np.zeros(0, np.int64) if idx is None else np.asarray(idx, dtype=np.int64).ravel()
+    if idx.size and (idx.min() < 0 or idx.max() >= n_nodes):
+        raise ValueError(
+            f"{name} must index nodes in [0, {n_nodes}), got [{idx.min()}, {idx.max()}]"
+        )
+    if np.unique(idx).size != idx.size:
+        raise ValueError(f"{name} contains repeated node indices")
+    return idx
+
+
+@dataclass(frozen=True)
+class SpringForce:
+    """Spring forces k_i u_i(t) (N), interpolated between frames like the prescribed motion."""
+
+    springs: SpringDrive
+    positions: NDArray  # (3S,) positions of the spring DOFs among the free DOFs
+    dofs: NDArray  # (3S,) spring DOFs
+    frame_dt: float
+    n_free: int
+
+    def _at(self, times: NDArray) -> NDArray:
+        t = self.springs.targets.reshape(len(self.springs.targets), -1)
+        return catmull_rom(t, self.frame_dt, times)[0] * np.repeat(self.springs.stiffness, 3)
+
+    def free(self, times: NDArray) -> NDArray:
+        """(len(times), n_free) forces on the free DOFs, N."""
+        out = np.zeros((len(times), self.n_free))
+        out[:, self.positions] = self._at(times)
+        return out
+
+    def full(self, time: float, n_dofs: int) -> NDArray:
+        """(n_dofs,) forces at one time, N."""
+        out = np.zeros(n_dofs)
+        out[self.dofs] = self._at(np.array([time]))[0]
+        return out
+
+
+@dataclass(frozen=True)
+class BoundaryConditions:
+    """Driven nodes ``driven_idx`` (n_d,) following ``values`` (T, 3 n_d) m (displacements
+    from rest at frame times k ``frame_dt`` s, Catmull-Rom between frames), nodes
+    ``fixed_idx`` (n_f,) held at rest, optional ``springs`` on free nodes (same frame times).
+    Build with :meth:`checked`."""
+
+    driven_idx: NDArray
+    fixed_idx: NDArray
+    values: NDArray
+    frame_dt: float
+    springs: SpringDrive | None = None
+
+    @classmethod
+    def checked(
+        cls,
+        n_nodes: int,
+        driven_idx: NDArray,
+        driven_traj: NDArray,
+        frame_dt: float,
+        fixed_idx: NDArray | None = None,
+        springs: SpringDrive | None = None,
+    ) -> BoundaryConditions:
+        """Validated conditions on a mesh of ``n_nodes``; driven_traj (T >= 2, n_d, 3) m.
+        Raises ValueError naming the argument and the rule."""
+        driven_idx = _node_index("driven_idx", driven_idx, n_nodes)
+        fixed_idx = _node_index("fixed_idx", fixed_idx, n_nodes)
+        traj = np.asarray(driven_traj, dtype=np.float64)
+        if traj.ndim != 3 or traj.shape[1:] != (driven_idx.size, 3) or len(traj) < 2:
+            raise ValueError(
+                f"driven_traj must have shape (T >= 2, {driven_idx.size}, 3), got {traj.shape}"
+            )
+        if not np.isfinite(traj).all():
+            raise ValueError("driven_traj contains NaN or Inf")
+        if np.intersect1d(driven_idx, fixed_idx).size:
+            raise ValueError("driven_idx and fixed_idx share nodes; a node is driven or fixed")
+        if not frame_dt > 0:
+            raise ValueError(f"frame_dt must be > 0 s, got {frame_dt}")
+        if springs is not None:
+            if len(springs.targets) != len(traj):
+                raise ValueError(
+                    f"springs have {len(springs.targets)} frames of targets, "
+                    f"driven_traj {len(traj)}"
+                )
+            if np.intersect1d(springs.nodes, np.r_[driven_idx, fixed_idx]).size:
+                raise ValueError("spring nodes must be free: not in driven_idx or fixed_idx")
+        return cls(driven_idx, fixed_idx, traj.reshape(len(traj), -1), frame_dt, springs)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.values)
+
+    @property
+    def prescribed_dofs(self) -> NDArray:
+        """(n_c,) prescribed DOFs: the driven nodes' then the fixed nodes'."""
+        return np.concatenate([node_dofs(self.driven_idx), node_dofs(self.fixed_idx)])
+
+    def prescribed(self, times: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """Displacement, velocity, acceleration (len(times), n_c) of the prescribed DOFs."""
+        d, v, a = catmull_rom(self.values, self.frame_dt, times)
+        pad = np.zeros((len(times), 3 * self.fixed_idx.size))
+        return tuple(np.hstack([x, pad]) for x in (d, v, a))
+
+    def with_springs(
+        self, K: sp.csr_matrix, split: tuple[sp.csr_matrix, sp.csr_matrix, NDArray] | None
+    ) -> tuple[sp.csr_matrix, tuple[sp.csr_matrix, sp.csr_matrix, NDArray] | None]:
+        """Stiffness K (n, n) N/m and its optional split (K_el, G, w) plus the springs'."""
+        if self.springs is None:
+            return K, split
+        k_springs = self.springs.matrix(K.shape[0])
+        if split is not None:
+            split = ((split[0] + k_springs).tocsr(), split[1], split[2])
+        return (K + k_springs).tocsr(), split
+
+    def spring_force(self, free: NDArray) -> SpringForce | None:
+        """The springs' forces over the ``free`` (n_u,) DOFs, or None without springs."""
+        if self.springs is None:
+            return None
+        dofs = self.springs.dofs()
+        return SpringForce(
+            self.springs, np.searchsorted(free, dofs), dofs, self.frame_dt, len(free)
+        )
+
+    def drive_energy(self, K: sp.csr_matrix) -> float:
+        """Energy scale of the drive, J: the largest 0.5 sum_i K_ii u_i^2 of a frame's
+        prescribed displacements, or of a frame's spring targets if larger."""
+        n_fix = 3 * self.fixed_idx.size
+        k_diag = K.diagonal()[self.prescribed_dofs]
+        u = np.hstack([self.values, np.zeros((self.n_frames, n_fix))])
+        energy = 0.5 * float(((u**2) @ k_diag).max())
+        if self.springs is not None:
+            s = self.springs
+            energy = max(energy, float(0.5 * ((s.targets**2).sum(axis=2) @ s.stiffness).max()))
+        return energy
 
 
 #: A landmark's patch always reaches at least this many nodes (see :func:`landmark_drive`).

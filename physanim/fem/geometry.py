@@ -67,6 +67,13 @@ def shape_gradients(nodes: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np
     return grads, vol
 
 
+def node_dofs(nodes: np.ndarray) -> np.ndarray:
+    """Global DOF indices of node ids (..., k) -> (..., 3k), 3 DOFs per node interleaved
+    (x, y, z): (n,) ids give (3n,) DOFs."""
+    nodes = np.asarray(nodes)
+    return (3 * nodes[..., None] + np.arange(3)).reshape(*nodes.shape[:-1], -1)
+
+
 def element_dofs(tets: np.ndarray) -> np.ndarray:
     """Global DOF indices (M, 12) of each tet, 3 DOFs per node interleaved (x, y, z)."""
-    return (3 * tets[:, :, None] + np.arange(3)).reshape(len(tets), 12)
+    return node_dofs(tets)

@@ -8,22 +8,12 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-from physanim.fem.assembly import (
-    assemble,
-    deviatoric_matrix,
-    element_blocks,
-    lame,
-    mass_matrix,
-    nodal_average,
-    nodal_divergence,
-    nodal_volumes,
-    strain_displacement,
-)
+from physanim.fem.assembly import assemble, element_blocks, mass_matrix, strain_displacement
+from physanim.fem.elements import ELEMENTS, Element
 from physanim.fem.geometry import element_dofs, shape_gradients
+from physanim.fem.laws import KelvinVoigt, MaterialLaw
 from physanim.fem.materials import TetMaterials
 from physanim.fem.params import SimulateParams
-
-_M_VOIGT = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
 
 
 # one pass per tet (strain, deviator, invariant): the numpy version made ~10 temporaries of
@@ -52,7 +42,8 @@ class FemModel:
     """Linear viscoelastic tet model. Matrices are (3N, 3N) CSR, DOFs interleaved x, y, z.
 
     K: stiffness, N/m. M: mass, kg. C: viscous damping, N s/m. K_el: the assembled
-    ``k_blocks`` (equal to K for 'p1', the deviatoric part for 'anp').
+    ``k_blocks`` (equal to K for 'p1', the deviatoric part for 'anp'). ``formulation``: the
+    element's name; ``mu`` (M,) the law's shear modulus, Pa (for the von Mises stress).
     ``k_blocks`` / ``c_blocks`` (M, 12, 12): element stiffness / damping blocks; for the
     'anp' formulation ``k_blocks`` holds only the deviatoric part and the volumetric part is
     G^T diag(w_vol) G with the nodal divergence G (N, 3N) = S (N, M) times the per-tet
@@ -98,31 +89,27 @@ def build_model(
     tets: np.ndarray,
     materials: TetMaterials,
     params: SimulateParams | None = None,
+    *,
+    law: MaterialLaw | None = None,
+    element: Element | None = None,
 ) -> FemModel:
-    """Assemble K, M, C of a tet mesh (nodes (N, 3) m, tets (M, 4) positively oriented)."""
+    """Assemble K, M, C of a tet mesh (nodes (N, 3) m, tets (M, 4) positively oriented).
+
+    ``law`` (default ``KelvinVoigt(params.viscosity)``) and ``element`` (default
+    ``ELEMENTS[params.formulation]``) may be any :class:`MaterialLaw` / :class:`Element`.
+    """
     params = params or SimulateParams()
+    law = law or KelvinVoigt(params.viscosity)
+    element = element or ELEMENTS[params.formulation]
     nodes = np.asarray(nodes, dtype=np.float64)
     tets = np.asarray(tets)
     grads, vol = shape_gradients(nodes, tets)
     mat = materials.validated(len(tets))
     n = len(nodes)
     B = strain_displacement(grads)
-    mu, kappa = lame(mat.E, mat.nu)
-    D = deviatoric_matrix(mu)
-    G = S = w_vol = None
-    if params.formulation == "p1":
-        D = D + kappa[:, None, None] * np.outer(_M_VOIGT, _M_VOIGT)
-    k_blocks = element_blocks(B, vol, D)
-    K = K_el = assemble(k_blocks, tets, n)
-    if params.formulation == "anp":
-        S = nodal_average(tets, vol, n)
-        G = nodal_divergence(grads, tets, S)
-        w_vol = nodal_volumes(tets, kappa * vol, n)  # kappa_n V_n, volume-averaged kappa
-        K = (K + G.T @ sp.diags(w_vol) @ G).tocsr()
-    normal = 2.0 if params.viscosity == "isotropic" else 1.0
-    c_blocks = element_blocks(B, vol, deviatoric_matrix(mat.eta, normal))
-    C = assemble(c_blocks, tets, n)
-    M = mass_matrix(tets, vol, mat.rho, n, lumped=params.mass == "lumped")
+    mu, kappa = law.moduli(mat)
+    stiff = element.stiffness(B, grads, vol, tets, n, mu, kappa)
+    c_blocks = element_blocks(B, vol, law.viscosity(mat))
     return FemModel(
         nodes=nodes,
         tets=tets,
@@ -130,15 +117,15 @@ def build_model(
         volumes=vol,
         B=B,
         mu=mu,
-        formulation=params.formulation,
-        K=K,
-        K_el=K_el,
-        M=M,
-        C=C,
-        k_blocks=k_blocks,
+        formulation=element.name,
+        K=stiff.K,
+        K_el=stiff.K_el,
+        M=mass_matrix(tets, vol, mat.rho, n, lumped=params.mass == "lumped"),
+        C=assemble(c_blocks, tets, n),
+        k_blocks=stiff.k_blocks,
         c_blocks=c_blocks,
-        G=G,
-        S=S,
-        w_vol=w_vol,
+        G=stiff.G,
+        S=stiff.S,
+        w_vol=stiff.w_vol,
         grads=grads,
     )

@@ -5,13 +5,33 @@ on every first parallel launch before falling back. OpenMP first, then TBB, then
 workqueue (which is not safe for concurrent launches from several Python threads).
 """
 
+import functools
 import time
 from collections.abc import Callable
+from typing import ParamSpec, TypeVar
 
 import numba
 import numpy as np
 
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+
+P = ParamSpec("P")
+R = TypeVar("R")
+
+
+def keeps_thread_count(fn: Callable[P, R]) -> Callable[P, R]:
+    """Decorator: numba's thread count is restored when ``fn`` returns or raises (``fn`` may
+    lower it with :func:`faster_thread_count`)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
+        most = numba.get_num_threads()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            numba.set_num_threads(most)
+
+    return wrapper
 
 
 def faster_thread_count(work: Callable[[], object], most: int, repeats: int = 3) -> int:

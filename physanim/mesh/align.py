@@ -3,7 +3,7 @@
 Three steps, all on arrays in metres in the project's actor frame (+x actor's left, +y up,
 +z out of the face, see :mod:`physanim.face.landmarks`):
 
-1. ``tracking.similarity.fit_transform`` -- least-squares similarity (or rigid) transform
+1. ``physanim.transforms.fit_transform`` -- least-squares similarity (or rigid) transform
    from landmark pairs (Umeyama 1991).
 2. :func:`per_axis_scale` -- the seed's per-axis scaling (SPEC eqs 5.1-5.4): the width ratio
    ``w_s / w_a`` for x and z, and separate height ratios above (``h_s,u / h_a,u``) and below
@@ -24,7 +24,7 @@ import scipy.sparse.linalg as spla
 from physanim.mesh.binding import REGION_FACE, bind_points
 from physanim.mesh.params import AlignParams
 from physanim.mesh.topology import boundary_vertex_mask, uniform_laplacian
-from physanim.tracking.similarity import Transform, fit_transform
+from physanim.transforms import Transform, fit_transform
 
 
 @dataclass(frozen=True)

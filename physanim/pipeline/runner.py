@@ -1,11 +1,11 @@
-"""Execute planned stages: compute into a temporary group, commit atomically, record the run."""
+"""Execute one planned stage: compute into a temporary group, commit atomically; record runs."""
 
 from __future__ import annotations
 
 import os
 import socket
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -129,35 +129,3 @@ def record_run(
     complete = all(s in keys for s in stages)
     facts = {"pipeline": pipeline.name, "complete": complete, **(info or {})}
     return store.record_run(keys, facts, latest=latest)
-
-
-def execute_plan_locally(
-    pipeline: Pipeline,
-    config: BaseModel,
-    entries: list[PlanEntry],
-    progress: ProgressFactory | None = None,
-    on_result: Callable[[StageResult], None] | None = None,
-    info: Mapping[str, Any] | None = None,
-) -> list[StageResult]:
-    """Run a plan in this process, in order, without Prefect (tests, debugging, ``--local``),
-    then record it as the latest run (also when a stage failed: what completed is kept);
-    ``info`` goes into the run manifest."""
-    store = StageStore(config.dataset.store_path)  # type: ignore[attr-defined]
-    store.remove_stale_temporaries()
-    results = []
-    try:
-        for e in entries:
-            if e.action == "skip":
-                continue
-            if e.action == "cached":
-                r = StageResult(e.stage, e.key, "cached", 0.0, {})
-            else:
-                r = execute_stage(pipeline, config, e, progress)
-            results.append(r)
-            if on_result:
-                on_result(r)
-    except StageFailed:
-        record_run(store, pipeline, {e.stage: e.key for e in entries}, info)
-        raise
-    record_run(store, pipeline, {e.stage: e.key for e in entries}, info)
-    return results

@@ -28,6 +28,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from physanim.config.loader import ConfigError, load_config, merge_sources, validate
+from physanim.pipeline.executor import Ident, Job, JobGraph, merge_plans
 from physanim.pipeline.plan import PlanEntry, make_plan
 from physanim.pipeline.spec import Pipeline, dataset_overrides
 from physanim.store import StageStore
@@ -97,38 +98,6 @@ def load_sweep(path: str | Path) -> tuple[SweepFile, list[Variant]]:
 
 
 @dataclass(frozen=True)
-class Job:
-    """One distinct stage execution of a sweep, identified by (store, stage, key)."""
-
-    store: str
-    entry: PlanEntry
-    variant: str  # the first variant that needs it; its config is used to run it
-    deps: tuple[tuple[str, str, str], ...]  # (store, stage, key) of upstream jobs
-
-    @property
-    def ident(self) -> tuple[str, str, str]:
-        """(store, stage, key)."""
-        return (self.store, self.entry.stage, self.entry.key)
-
-
-def merge_plans(plans: dict[str, tuple[str, list[PlanEntry]]]) -> list[Job]:
-    """One job per distinct (store, stage, key) to run, in an order where deps come first.
-
-    ``plans`` maps variant name -> (store path, plan entries).
-    """
-    jobs: dict[tuple[str, str, str], Job] = {}
-    for variant, (store, entries) in plans.items():
-        for e in entries:
-            if e.action != "run":
-                continue
-            ident = (store, e.stage, e.key)
-            if ident not in jobs:
-                deps = tuple((store, u, k) for u, k in e.upstream.items())
-                jobs[ident] = Job(store, e, variant, deps)
-    return list(jobs.values())
-
-
-@dataclass(frozen=True)
 class SweepPlan:
     """A planned sweep: its file, pipeline and variants, each variant's validated config,
     store (path) and stage keys (stage -> key), and the distinct jobs to run."""
@@ -140,6 +109,11 @@ class SweepPlan:
     stores: dict[str, str]
     keys: dict[str, dict[str, str]]
     jobs: list[Job]
+
+    @property
+    def graph(self) -> JobGraph:
+        """The jobs as an executor runs them."""
+        return JobGraph(self.pipeline, self.configs, self.jobs)
 
     @property
     def run_dir(self) -> Path:
@@ -190,13 +164,7 @@ def plan_sweep(
     )
 
 
-def blocked(job: Job, outcomes: Mapping[tuple[str, str, str], object]) -> bool:
-    """True when an upstream job of ``job`` ran in this sweep and did not succeed (its
-    outcome is an error text or None)."""
-    return any(d in outcomes and isinstance(outcomes[d], str | None) for d in job.deps)
-
-
-def variant_errors(plan: SweepPlan, failed: Mapping[tuple[str, str, str], str]) -> dict[str, str]:
+def variant_errors(plan: SweepPlan, failed: Mapping[Ident, str]) -> dict[str, str]:
     """variant -> error of the first failed job whose output it needs (variants that need
     none are absent); ``failed``: (store, stage, key) -> error text."""
     errors = {}

@@ -8,7 +8,7 @@ import numpy as np
 
 from physanim.tracking.lift import lift_depth
 from physanim.tracking.params import TrackParams
-from physanim.tracking.track import Tracks, head_poses, smooth_tracks
+from physanim.tracking.tracks import Tracks, head_poses, smooth_tracks
 
 
 def tracks_from_points(

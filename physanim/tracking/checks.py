@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from physanim.tracking.similarity import fit_transform
-from physanim.tracking.track import TrackingError, Tracks
+from physanim.tracking.tracks import TrackingError, Tracks
+from physanim.transforms import fit_transform
 
 __all__ = ["TrackingError", "check_tracks", "face_scale"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from physanim.tracking.similarity import Transform, fit_transform
+from physanim.transforms import Transform, fit_transform
 
 _BIG = 1e6
 

@@ -40,7 +40,7 @@ import numpy as np
 from physanim.face.landmarks import FEATURE_POINTS
 from physanim.tracking.assemble import tracks_from_depth
 from physanim.tracking.params import TrackParams
-from physanim.tracking.track import TrackingError, Tracks
+from physanim.tracking.tracks import TrackingError, Tracks
 
 #: SPEC feature point -> MediaPipe Face Mesh vertices (canonical 468-vertex topology) whose
 #: mean is the point; midpoints where the mesh has no vertex on the landmark (the philtrum

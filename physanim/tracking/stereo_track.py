@@ -24,7 +24,8 @@ from physanim.tracking.detect import detect_markers
 from physanim.tracking.label import assign, label_markers
 from physanim.tracking.lift import triangulate_rectified
 from physanim.tracking.params import TrackParams
-from physanim.tracking.track import Tracks, frontal_template, track_markers_2d
+from physanim.tracking.track import frontal_template, track_markers_2d
+from physanim.tracking.tracks import Tracks
 
 
 def read_stereo_pairs(

@@ -7,36 +7,16 @@ are metres in the colour camera frame (OpenCV axes: +x right, +y down, +z forwar
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from physanim.tracking.assemble import tracks_from_depth
 from physanim.tracking.detect import detect_markers
 from physanim.tracking.label import assign, label_markers
 from physanim.tracking.params import TrackParams
-from physanim.tracking.similarity import fit_transform
-from physanim.tracking.smooth import kalman_rts, one_euro
-
-
-class TrackingError(ValueError):
-    """Tracking found nothing usable; the message names the cause and the fix."""
-
-
-@dataclass(frozen=True)
-class Tracks:
-    """Tracked landmarks over T frames and K landmarks.
-
-    ``uv`` (T, K, 2) px and ``points`` (T, K, 3) m (camera frame) are NaN where a landmark
-    was not observed; ``confidence`` (T, K) in [0, 1] (0 = lost); ``head_pose`` (T, 4, 4)
-    camera <- actor rigid transform (m) fitted to the observed landmarks.
-    """
-
-    uv: np.ndarray
-    points: np.ndarray
-    confidence: np.ndarray
-    head_pose: np.ndarray
+from physanim.tracking.tracks import TrackingError, Tracks
 
 
 def frontal_template(markers_actor: np.ndarray) -> np.ndarray:
@@ -143,73 +123,6 @@ def _follow_neighbours(
     return before[targets] + motion[nn.reshape(int(targets.sum()), -1)].mean(axis=1)
 
 
-def smooth_tracks(points: np.ndarray, fps: float, params: TrackParams) -> np.ndarray:
-    """Apply the configured temporal filter to tracks (T, K, 3) m (NaN gaps stay NaN)."""
-    if params.smoothing == "one_euro":
-        return one_euro(points, fps, params.one_euro_min_cutoff, params.one_euro_beta)
-    if params.smoothing == "kalman":
-        return kalman_rts(points, fps, params.kalman_accel_std, params.kalman_meas_std)
-    return points.copy()
-
-
-def _frame_poses(
-    points: np.ndarray, confidence: np.ndarray, template_actor: np.ndarray, iterations: int
-) -> np.ndarray:
-    """Per-frame weighted Kabsch with Cauchy reweighting (see :func:`head_poses`)."""
-    out = np.full((len(points), 4, 4), np.nan)
-    for t in range(len(points)):
-        w = np.where(np.isfinite(points[t]).all(axis=1), confidence[t], 0.0)
-        if np.count_nonzero(w) < 3:
-            continue
-        target = np.nan_to_num(points[t])
-        weights = w.copy()
-        for _ in range(iterations):
-            tr = fit_transform(template_actor, target, weights, with_scale=False)
-            res = np.linalg.norm(tr.apply(template_actor) - target, axis=1)
-            scale = np.median(res[w > 0]) + 1e-6
-            weights = w / (1.0 + (res / scale) ** 2)
-        out[t] = np.eye(4)
-        out[t, :3, :3], out[t, :3, 3] = tr.rotation, tr.translation
-    return out
-
-
-def rigidity_weights(points: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """How rigidly each landmark rides with the head: (K,) in (0, 1].
-
-    ``points`` (T, K, 3) m camera frame, ``poses`` (T, 4, 4) camera <- actor.  A landmark's
-    non-rigid motion m_k is the RMS distance, in the head frame, of its positions from their
-    median over the sequence; weight 1 / (1 + (m_k / median(m))^2).
-    """
-    stab = np.einsum("tji,tkj->tki", poses[:, :3, :3], points - poses[:, None, :3, 3])
-    with np.errstate(invalid="ignore"):
-        spread = ((stab - np.nanmedian(stab, axis=0)) ** 2).sum(axis=2)
-    ok = np.isfinite(spread)
-    m = np.sqrt(np.where(ok, spread, 0.0).sum(axis=0) / np.maximum(ok.sum(axis=0), 1))
-    scale = float(np.median(m[ok.any(axis=0)])) if ok.any() else 0.0
-    return 1.0 / (1.0 + (m / max(scale, 1e-9)) ** 2)
-
-
-def head_poses(
-    points: np.ndarray, confidence: np.ndarray, template_actor: np.ndarray, iterations: int = 3
-) -> np.ndarray:
-    """Per-frame camera <- actor rigid transforms (T, 4, 4) from tracks (T, K, 3) m.
-
-    Weighted Kabsch of the actor-frame template (K, 3) m onto each frame's observed points,
-    in two passes.  Within a frame, points moving with the expression are down-weighted
-    (Cauchy weights on the residual, scale = median residual); between the passes, each
-    landmark is weighted by how rigidly it rode with the head over the whole sequence
-    (:func:`rigidity_weights`), so the mouth and chin do not drag the pose while they move
-    together (on the demo's smile this halved the head-frame error of the moving landmarks:
-    relative error 0.32 -> 0.17).  Frames with fewer than 3 observed points give NaN.
-    """
-    first = _frame_poses(points, confidence, template_actor, iterations)
-    seen = np.isfinite(first[:, 0, 0])
-    if seen.sum() < 2:
-        return first
-    rho = rigidity_weights(points[seen], first[seen])
-    return _frame_poses(points, confidence * rho[None], template_actor, iterations)
-
-
 def track_markers_rgbd(
     colors: Sequence[np.ndarray],
     depths: Sequence[np.ndarray],
@@ -227,7 +140,5 @@ def track_markers_rgbd(
     """
     if len(colors) != len(depths):
         raise ValueError(f"colors ({len(colors)}) and depths ({len(depths)}): frame counts differ")
-    from physanim.tracking.assemble import tracks_from_depth  # assemble imports this module
-
     uv, conf = track_markers_2d(colors, frontal_template(template_actor), params, progress)
     return tracks_from_depth(uv, conf, depths, K, template_actor, fps, params)

@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 import pytest
 
-from physanim.capture.check import CheckReport, check_dataset
 from physanim.capture.params import IngestParams
+from physanim.tracking.dataset_check import CheckReport, check_dataset
 from physanim.tracking.params import TrackParams
 
 from .photo_dataset import FX, write_photo_dataset
@@ -61,7 +61,7 @@ def test_cli_on_a_real_photo_dataset_and_a_broken_one() -> None:
                 [
                     sys.executable,
                     "-m",
-                    "physanim",
+                    "cli",
                     "check",
                     f"{rel}/{name}",
                     "--set",

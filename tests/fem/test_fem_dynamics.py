@@ -6,6 +6,7 @@ import scipy.linalg as sla
 from fem_meshes import box_mesh
 
 import physanim.fem.newmark as newmark_module
+from physanim.fem.geometry import node_dofs
 from physanim.fem.linsolve import has_cholmod
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
@@ -18,7 +19,7 @@ def _cantilever(eta, mass="consistent", formulation="anp"):
     nodes, tets = box_mesh((2, 2, 4), (0.01, 0.01, 0.02))
     params = SimulateParams(mass=mass, formulation=formulation)
     model = build_model(nodes, tets, TetMaterials.uniform(len(tets), eta=eta), params)
-    fixed = (3 * np.flatnonzero(nodes[:, 2] == 0)[:, None] + np.arange(3)).ravel()
+    fixed = node_dofs(np.flatnonzero(nodes[:, 2] == 0))
     f = np.zeros(model.n_dofs)
     f[3 * np.flatnonzero(np.isclose(nodes[:, 2], 0.02))] = 1e-3
     d0 = solve_static(model.K, fixed, np.zeros(len(fixed)), f)  # released from a bent pose

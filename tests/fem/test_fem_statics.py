@@ -4,15 +4,11 @@ import numpy as np
 import pytest
 from fem_meshes import box_mesh, cylinder_sector, lame_cylinder_ur
 
-from physanim.fem.geometry import signed_volumes
+from physanim.fem.geometry import node_dofs, signed_volumes
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.params import SimulateParams
 from physanim.fem.statics import reactions, solve_static
-
-
-def _dofs(idx):
-    return (3 * np.asarray(idx)[:, None] + np.arange(3)).ravel()
 
 
 @pytest.mark.parametrize("formulation", ["anp", "p1"])
@@ -26,7 +22,7 @@ def test_patch_constant_strain_is_exact(formulation):
     exact = nodes @ grad.T + [1e-4, -2e-4, 3e-4]
     mat = TetMaterials.uniform(len(tets), E=1e5, nu=0.45)
     model = build_model(nodes, tets, mat, SimulateParams(formulation=formulation))
-    bnd = _dofs(np.flatnonzero(~inner))
+    bnd = node_dofs(np.flatnonzero(~inner))
     d = solve_static(model.K, bnd, exact.ravel()[bnd]).reshape(-1, 3)
     np.testing.assert_allclose(d[inner], exact[inner], rtol=0, atol=1e-12)
     # constant strain -> in every tet the von Mises stress of s = 2 mu dev(eps)
@@ -101,7 +97,7 @@ def test_lame_cylinder_p1_locks_at_0495():
 def test_reactions_balance_applied_load():
     nodes, tets = box_mesh((2, 2, 4), (0.01, 0.01, 0.02))
     model = build_model(nodes, tets, TetMaterials.uniform(len(tets)))
-    fixed = _dofs(np.flatnonzero(nodes[:, 2] == 0))
+    fixed = node_dofs(np.flatnonzero(nodes[:, 2] == 0))
     top = np.flatnonzero(np.isclose(nodes[:, 2], 0.02))
     f = np.zeros(model.n_dofs)
     f[3 * top] = 0.01  # shear along x

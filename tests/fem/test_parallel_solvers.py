@@ -7,6 +7,7 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from physanim.fem.geometry import node_dofs
 from physanim.fem.linsolve import CholmodFactors, factorize, factorize_split, has_cholmod
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
@@ -47,7 +48,7 @@ def _tet_model():
     nodes, tets = box_mesh((6, 5, 4), (0.06, 0.05, 0.02))
     model = build_model(nodes, tets, TetMaterials.uniform(len(tets)), SimulateParams())
     fixed = np.flatnonzero(nodes[:, 2] < 1e-9)
-    pres = (3 * fixed[:, None] + np.arange(3)).ravel()
+    pres = node_dofs(fixed)
     free = np.setdiff1d(np.arange(model.n_dofs), pres)
     dt = 1e-3
     A_el = model.split[0] + 4 / dt**2 * model.M + 2 / dt * model.C

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_flow_runs_each_stage_as_a_prefect_task(toy_config: Path, tmp_path: Path) -> None:
     env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_")}
     env.update(PYTHONPATH=str(ROOT), HOME=str(tmp_path / "home"))
-    args = [sys.executable, "-m", "physanim", "run", "-p", "tests.foundation.toy_stages:TOY"]
+    args = [sys.executable, "-m", "cli", "run", "-p", "tests.foundation.toy_stages:TOY"]
     args += ["-c", str(toy_config)]
     out = subprocess.run(args, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stdout + out.stderr

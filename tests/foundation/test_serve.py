@@ -26,7 +26,7 @@ def test_serve_processes_new_dataset_and_stops_on_signal(tmp_path: Path) -> None
     (datasets / "first").mkdir(parents=True)
     env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_")}
     env.update(PYTHONPATH=str(ROOT), PHYSANIM_TOY_LOG=str(tmp_path / "executions.log"))
-    cmd = [sys.executable, "-m", "physanim", "serve", str(datasets)]
+    cmd = [sys.executable, "-m", "cli", "serve", str(datasets)]
     cmd += ["-p", "tests.foundation.toy_stages:TOY", "--interval", "3"]
     proc = subprocess.Popen(
         cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True

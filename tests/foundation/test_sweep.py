@@ -41,7 +41,7 @@ def test_expansion_grid_times_list(tmp_path: Path) -> None:
 
 
 def test_worker_thread_env_shares_out_the_cores() -> None:
-    from flows.sweep import THREAD_ENV, worker_thread_env
+    from flows.dask_cluster import THREAD_ENV, worker_thread_env
 
     assert worker_thread_env(2, cores=2) == dict.fromkeys(THREAD_ENV, "1")
     assert worker_thread_env(1, cores=2)["NUMBA_NUM_THREADS"] == "2"
@@ -57,7 +57,7 @@ def test_sweep_on_dask_computes_shared_stage_once(toy_config: Path, tmp_path: Pa
     )
     env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_")}
     env.update(PYTHONPATH=str(ROOT), PHYSANIM_TOY_LOG=str(tmp_path / "executions.log"))
-    cmd = [sys.executable, "-m", "physanim", "sweep", str(sweep), "--workers", "2"]
+    cmd = [sys.executable, "-m", "cli", "sweep", str(sweep), "--workers", "2"]
     out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     ran = executions(tmp_path)
@@ -145,8 +145,9 @@ def test_a_failing_variant_leaves_the_others_complete(data_folder: Path, tmp_pat
 
 
 def test_dask_address_without_a_scheduler_is_one_line() -> None:
-    from flows.sweep import _connect, _free_port
+    from flows.dask_cluster import connect
+    from flows.prefect_env import free_port
 
-    address = f"tcp://127.0.0.1:{_free_port()}"
+    address = f"tcp://127.0.0.1:{free_port()}"
     with pytest.raises(ValueError, match=rf"^--dask-address {address}: no Dask scheduler answers"):
-        _connect(address, timeout_s=1.0)
+        connect(address, timeout_s=1.0)

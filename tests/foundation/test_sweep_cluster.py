@@ -48,10 +48,10 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Pat
 
     The sweep starts at once: it waits for the workers itself while its Prefect server starts.
     """
-    from flows.sweep import _free_port
+    from flows.prefect_env import free_port
 
     folder = tmp_path_factory.mktemp("cluster")
-    address = f"tcp://127.0.0.1:{_free_port()}"
+    address = f"tcp://127.0.0.1:{free_port()}"
     env = physanim_env(PHYSANIM_TOY_LOG=str(folder / "executions.log"))
     procs: list[subprocess.Popen] = []
     try:

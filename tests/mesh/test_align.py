@@ -13,7 +13,7 @@ from physanim.mesh.align import (
 )
 from physanim.mesh.binding import bind_points
 from physanim.mesh.params import AlignParams
-from physanim.tracking.similarity import fit_transform
+from physanim.transforms import fit_transform
 
 
 def test_similarity_recovers_a_known_similarity():

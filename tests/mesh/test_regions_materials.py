@@ -7,7 +7,7 @@ import pytest
 import yaml
 from pydantic import ValidationError
 
-from physanim.mesh.materials import material_table, tet_materials
+from physanim.fem.region_materials import material_table, tet_materials
 from physanim.mesh.params import REGION_NAMES, MaterialModel, MaterialsParams
 from physanim.mesh.regions import (
     DEFAULT_LABEL,

@@ -6,6 +6,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import Delaunay
 
+from physanim.fem.geometry import node_dofs
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.statics import solve_static
@@ -87,7 +88,7 @@ def test_cut_lets_the_lower_lip_drop_while_the_upper_lip_stays() -> None:
         bottom = np.nonzero(x[:, 2] < -0.0099)[0]
         values = np.zeros((len(bottom), 3))
         values[x[bottom, 1] < 0.0, 1] = -0.002  # the "mandible" drops 2 mm
-        dofs = (3 * bottom[:, None] + np.arange(3)).ravel()
+        dofs = node_dofs(bottom)
         d = solve_static(model.K, dofs, values.ravel()).reshape(-1, 3)
         top = np.nonzero((x[:, 2] > -1e-4) & (np.abs(x[:, 0]) < 0.008))[0]
         upper = top[(x[top, 1] > 0.006) & (x[top, 1] < 0.010)]  # clear of the seam

@@ -53,7 +53,7 @@ def test_cli_warns_of_torque_the_muscles_cannot_produce(tmp_path: Path) -> None:
     root = Path(__file__).resolve().parents[2]
     readme = "run -p arm --local --only muscles --set muscles.conditions.load_1kg.arm.load_mass=5.0"
     run = subprocess.run(  # the README's command, writing to a temporary dataset directory
-        [sys.executable, "-m", "physanim", *readme.split(), "--set", f"dataset.dir={tmp_path}"],
+        [sys.executable, "-m", "cli", *readme.split(), "--set", f"dataset.dir={tmp_path}"],
         cwd=root,
         env={**os.environ, "COLUMNS": "250"},
         capture_output=True,

@@ -117,7 +117,7 @@ def test_full_disk_on_a_small_tmpfs(toy_config: Path, tmp_path: Path) -> None:
     """A real full disk (ENOSPC): the store on a 256 KiB tmpfs in a private mount namespace."""
     disk = tmp_path / "disk"
     disk.mkdir()
-    cli = f"{sys.executable} -m physanim"
+    cli = f"{sys.executable} -m cli"
     args = f"-p {TOY} -c {toy_config} --dataset {disk}/ds --local"
     script = f"""
         mount -t tmpfs -o size=256k tmpfs {disk} || exit 99

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from physanim.cli import app
+from cli.app import app
 from physanim.processes import process_alive, start_time
 from physanim.store import StageStore
 from physanim.store.stage_store import TMP

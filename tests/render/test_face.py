@@ -6,15 +6,10 @@ import numpy as np
 import pytest
 from matplotlib import colormaps
 
-from physanim.render.face import (
-    BACKGROUND,
-    BAR_HEIGHT,
-    ColourMap,
-    frontal_camera,
-    render_sequence,
-    render_surface,
-    turntable,
-)
+from physanim.render.camera import frontal_camera, turntable
+from physanim.render.colours import BACKGROUND, BAR_HEIGHT, ColourMap
+from physanim.render.face import render_sequence
+from physanim.render.surface import render_surface
 
 SIZE = (240, 320)  # (W, H) px
 BG = np.round(255 * np.asarray(BACKGROUND)).astype(np.uint8)

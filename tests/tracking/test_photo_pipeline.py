@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from flows.dags import FACE
-from physanim.capture.check import check_dataset
 from physanim.config import load_config
 from physanim.face.landmarks import FEATURE_POINTS
 from physanim.face.params import FitParams
 from physanim.pipeline import StageFailed, execute_plan_locally, make_plan
 from physanim.store import StageStore
+from physanim.tracking.dataset_check import check_dataset
 from tasks.fit import _check_tracked
 from tests.capture.photo_dataset import FX, photo_depth, write_photo_dataset
 

@@ -9,9 +9,9 @@ from physanim.tracking.detect import detect_markers
 from physanim.tracking.label import assign, label_markers
 from physanim.tracking.lift import backproject, lift_depth, sample_depth, triangulate_rectified
 from physanim.tracking.params import TrackParams
-from physanim.tracking.similarity import fit_transform
 from physanim.tracking.smooth import kalman_rts, one_euro
 from physanim.tracking.track import track_markers_2d
+from physanim.transforms import fit_transform
 
 from .synthetic import draw, template
 

@@ -1,7 +1,8 @@
 """The ``physanim`` command line: run, status, verify, dag, show, clean, demo, sweep, serve.
 
-The CLI is the application's entry point: it loads the DAG declarations from ``tasks/`` and,
-for ``run``, the Prefect flow from ``flows/`` (imported lazily, so ``status``, ``dag``, ``show``
+The CLI is the application's entry point, above ``flows/``: it loads the DAG declarations from
+``flows.dags`` and runs plans through an executor (``physanim.pipeline``'s local one, or
+``flows.executors``' Prefect and Dask ones, imported lazily, so ``status``, ``dag``, ``show``
 and ``clean`` never need Prefect).  Errors are one line; ``--debug`` anywhere on the command
 line (or PHYSANIM_DEBUG=1) shows their tracebacks.
 """
@@ -17,6 +18,7 @@ import subprocess
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -26,33 +28,39 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from physanim.config import ConfigError, load_config
-from physanim.pipeline import Pipeline, PlanEntry, StageFailed, StageResult, make_plan
-from physanim.pipeline.spec import dataset_overrides
+from cli.options import (
+    ConfigOpt,
+    PipelineOpt,
+    SetOpt,
+    Target,
+    console,
+    fail,
+    get_pipeline,
+    load,
+    with_target,
+)
+from physanim.config import ConfigError
+from physanim.pipeline import (
+    Executor,
+    LocalExecutor,
+    Pipeline,
+    PlanEntry,
+    ProgressFactory,
+    StageFailed,
+    StageResult,
+    make_plan,
+    run_plan,
+)
+from physanim.pipeline.progress import rich_progress
 from physanim.store import StageOutputMissing, StageStore
 from physanim.store.stage_store import QUARANTINE
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help=__doc__, pretty_exceptions_enable=False
 )
-console = Console(stderr=True, soft_wrap=True)  # messages stay one line (no wrapping)
 #: set by ``main`` from --debug / PHYSANIM_DEBUG: errors show their tracebacks
 DEBUG = False
 
-PipelineOpt = Annotated[
-    str, typer.Option("--pipeline", "-p", help="DAG: face, ..., or package.module:ATTRIBUTE")
-]
-ConfigOpt = Annotated[
-    list[Path] | None,
-    typer.Option("--config", "-c", help="extra YAML config merged over the default (repeatable)"),
-]
-SetOpt = Annotated[
-    list[str] | None,
-    typer.Option("--set", "-s", help="override one value: dotted.key=value (repeatable)"),
-]
-DatasetOpt = Annotated[
-    str | None, typer.Option("--dataset", "-d", help="dataset name (data/<name>) or directory")
-]
 OnlyOpt = Annotated[str | None, typer.Option("--only", help="run just this stage")]
 FromOpt = Annotated[str | None, typer.Option("--from", help="run this stage and its downstream")]
 ForceOpt = Annotated[
@@ -60,64 +68,36 @@ ForceOpt = Annotated[
 ]
 
 
-def _fail(message: str, code: int = 2) -> typer.Exit:
-    """Print ``error: message`` (one line, no markup interpretation); returns the Exit to raise."""
-    console.print(f"[red]error:[/red] {escape(message)}", highlight=False)
-    return typer.Exit(code)
-
-
-def _pipeline(name: str) -> Pipeline:
-    from flows.dags import get_pipeline
-
-    try:
-        return get_pipeline(name)
-    except ValueError as exc:
-        raise _fail(str(exc)) from None
-
-
 def _stage(pipeline: Pipeline, name: str) -> None:
     try:
         pipeline.stage(name)
     except ValueError as exc:
-        raise _fail(str(exc)) from None
-
-
-def load(
-    pipeline: Pipeline, configs: list[Path] | None, sets: list[str] | None, dataset: str | None
-) -> BaseModel:
-    """Validated config of ``pipeline``: default file, ``-c`` files, dataset, ``--set``."""
-    files = [pipeline.default_config, *(configs or [])]
-    overrides = (dataset_overrides(dataset) if dataset else []) + list(sets or [])
-    try:
-        config, _ = load_config(pipeline.config_model(), files, overrides)
-    except ConfigError as exc:
-        raise _fail(str(exc)) from None
-    return config
-
-
-def _store(config: BaseModel, *, create: bool = True) -> StageStore:
-    """The config's stage store; ``create=False`` for commands that only read (nothing is
-    created, not even a missing dataset directory)."""
-    return StageStore(config.dataset.store_path, create=create)  # type: ignore[attr-defined]
+        raise fail(str(exc)) from None
 
 
 def _plan(
-    pipeline: Pipeline,
-    config: BaseModel,
-    only: str | None,
-    start: str | None,
-    force: list[str] | None,
+    target: Target,
+    only: str | None = None,
+    start: str | None = None,
+    force: list[str] | None = None,
     *,
     create: bool = True,
     checksums: bool = False,
 ) -> tuple[StageStore, list[PlanEntry]]:
-    store = _store(config, create=create)
+    """The target's store and the plan of a run of it (``create``: as for Target.store)."""
+    store = target.store(create=create)
     try:
         entries = make_plan(
-            pipeline, config, store, only=only, start=start, force=force or (), checksums=checksums
+            target.pipeline,
+            target.config,
+            store,
+            only=only,
+            start=start,
+            force=force or (),
+            checksums=checksums,
         )
     except ValueError as exc:
-        raise _fail(str(exc)) from None
+        raise fail(str(exc)) from None
     return store, entries
 
 
@@ -149,11 +129,9 @@ def _log_result(r: StageResult) -> None:
 
 
 @app.command()
+@with_target
 def run(
-    pipeline: PipelineOpt = "face",
-    config: ConfigOpt = None,
-    set_: SetOpt = None,
-    dataset: DatasetOpt = None,
+    target: Target,
     only: OnlyOpt = None,
     start: FromOpt = None,
     force: ForceOpt = None,
@@ -166,21 +144,19 @@ def run(
 ) -> None:
     """Run the DAG (or part of it); cached stages are reused, damaged ones recomputed."""
     t0 = time.perf_counter()
-    dag = _pipeline(pipeline)
-    cfg = load(dag, config, set_, dataset)
+    dag, cfg = target.pipeline, target.config
     _tidy_up()
     _prepare(dag, cfg)
-    store, entries = _plan(dag, cfg, only, start, force, checksums=verify)
+    store, entries = _plan(target, only, start, force, checksums=verify)
     for leftover in store.remove_stale_temporaries():
         console.print(f"removed abandoned partial output {leftover.name}")
     _quarantine(store, entries)
     todo = [e for e in entries if e.action == "run"]
-    info = {
-        "configs": [str(c) for c in config or []],
-        "overrides": (dataset_overrides(dataset) if dataset else []) + list(set_ or []),
-    }
+    info = {"configs": [str(c) for c in target.configs], "overrides": target.overrides}
     try:
-        _execute(dag, cfg, store, entries, local=local or not todo, info=info)
+        with rich_progress(console) as progress:
+            executor = _executor(dag, cfg, progress, local=local or not todo)
+            run_plan(executor, dag, cfg, entries, on_result=_log_result, info=info)
     except StageFailed as exc:
         if DEBUG:
             raise
@@ -189,7 +165,7 @@ def run(
         text = (
             f"stage '{exc.stage}' failed: {_describe(cause, where)}" if _is_io(cause) else str(exc)
         )
-        _fail(text)
+        fail(text)
         console.print("(outputs of the stages before it are kept; fix and run again)")
         raise typer.Exit(1) from None
     if dag.report is not None:
@@ -197,52 +173,26 @@ def run(
         if report is not None:
             console.print(f"report: {report}")
     console.print(
-        f"{pipeline}: {len(todo)} stage(s) ran, {len(entries) - len(todo)} cached/skipped, "
+        f"{dag.name}: {len(todo)} stage(s) ran, {len(entries) - len(todo)} cached/skipped, "
         f"{time.perf_counter() - t0:.1f} s; store {store.root}"
     )
 
 
-def _execute(
-    dag: Pipeline,
-    cfg: BaseModel,
-    store: StageStore,
-    entries: list[PlanEntry],
-    local: bool,
-    info: dict[str, object],
-) -> None:
-    """Run the plan here (``local``) or as a Prefect flow, logging one line per stage; then
-    record the run (also after a failed stage) as the latest."""
-    from physanim.pipeline import execute_plan_locally, record_run
-    from physanim.pipeline.progress import rich_progress
-
+def _executor(dag: Pipeline, cfg: BaseModel, progress: ProgressFactory, *, local: bool) -> Executor:
+    """This process's executor (``local``: no Prefect is imported), else a Prefect flow
+    reporting to the run directory's shared Prefect server."""
     if local:
-        with rich_progress(console) as progress:
-            execute_plan_locally(dag, cfg, entries, progress, on_result=_log_result, info=info)
-        return
-    from flows.prefect_env import configure, shared_server
+        return LocalExecutor(progress)
+    from flows.prefect_env import configure
 
-    home = configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]
-    for e in entries:
-        if e.action == "cached":
-            _log_result(StageResult(e.stage, e.key, "cached", 0.0, {}))
-    try:
-        with shared_server(home) as (url, _), rich_progress(console) as progress:
-            os.environ["PREFECT_API_URL"] = url  # before Prefect is imported
-            from flows.pipeline_flow import pipeline_flow
+    home = configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]  (before Prefect loads)
+    from flows.executors import PrefectExecutor
 
-            named = pipeline_flow.with_options(name=f"physanim-{dag.name}")
-            for r in named(dag, cfg, entries, progress):
-                _log_result(r)
-    except StageFailed:
-        record_run(store, dag, {e.stage: e.key for e in entries}, info)
-        raise
-    record_run(store, dag, {e.stage: e.key for e in entries}, info)
+    return PrefectExecutor(home, name=f"physanim-{dag.name}", progress=progress)
 
 
 def _prepare(dag: Pipeline, cfg: BaseModel) -> None:
     """Make what the pipeline needs before it can be planned (the demo dataset), saying so."""
-    from physanim.pipeline.progress import rich_progress
-
     if dag.prepare is not None:
         with rich_progress(console) as progress:
             made = dag.prepare(cfg, progress)
@@ -275,11 +225,9 @@ def _tidy_up() -> None:
 
 
 @app.command()
+@with_target
 def status(
-    pipeline: PipelineOpt = "face",
-    config: ConfigOpt = None,
-    set_: SetOpt = None,
-    dataset: DatasetOpt = None,
+    target: Target,
     only: OnlyOpt = None,
     start: FromOpt = None,
     force: ForceOpt = None,
@@ -289,12 +237,10 @@ def status(
     ] = False,
 ) -> None:
     """Dry run: for each stage, cached, will run or damaged, and why (writes nothing)."""
-    dag = _pipeline(pipeline)
-    cfg = load(dag, config, set_, dataset)
-    data = cfg.dataset.path  # type: ignore[attr-defined]
+    data = target.config.dataset.path  # type: ignore[attr-defined]
     if not data.exists():
         console.print(f"note: dataset directory {data} does not exist", highlight=False)
-    _, entries = _plan(dag, cfg, only, start, force, create=False, checksums=verify)
+    _, entries = _plan(target, only, start, force, create=False, checksums=verify)
     if as_json:
         rows = [
             {"stage": e.stage, "key": e.key, "action": e.action, "why": e.reason,
@@ -307,15 +253,10 @@ def status(
 
 
 @app.command()
-def verify(
-    pipeline: PipelineOpt = "face",
-    config: ConfigOpt = None,
-    set_: SetOpt = None,
-    dataset: DatasetOpt = None,
-) -> None:
+@with_target
+def verify(target: Target) -> None:
     """Check every output of the store against its manifest (files, sizes, checksums)."""
-    cfg = load(_pipeline(pipeline), config, set_, dataset)
-    store = _store(cfg, create=False)
+    store = target.store(create=False)
     checked = damaged = 0
     for stage in store.stages():
         for key in store.all_keys(stage):
@@ -334,6 +275,14 @@ def verify(
         raise typer.Exit(1)
 
 
+#: ``physanim dag --format``: name -> the text of a pipeline in that format
+DAG_FORMATS: dict[str, Callable[[Pipeline], str]] = {
+    "text": Pipeline.text,
+    "mermaid": Pipeline.mermaid,
+    "dot": Pipeline.dot,
+}
+
+
 @app.command()
 def dag(
     pipeline: PipelineOpt = "face",
@@ -341,21 +290,10 @@ def dag(
     output: Annotated[Path | None, typer.Option("--output", "-o", help="write to file")] = None,
 ) -> None:
     """Print the DAG (text), or write it as Mermaid or Graphviz text."""
-    d = _pipeline(pipeline)
-    if fmt == "mermaid":
-        text = d.mermaid()
-    elif fmt == "dot":
-        text = d.dot()
-    elif fmt == "text":
-        text = "".join(
-            f"{s.name} (v{s.version})"
-            + (f" <- {', '.join(s.upstream)}" if s.upstream else "")
-            + (f": {s.doc}" if s.doc else "")
-            + "\n"
-            for s in d.stages
-        )
-    else:
-        raise typer.BadParameter(f"--format must be text, mermaid or dot, not {fmt!r}")
+    d = get_pipeline(pipeline)
+    if fmt not in DAG_FORMATS:
+        raise typer.BadParameter(f"--format must be {', '.join(DAG_FORMATS)}, not {fmt!r}")
+    text = DAG_FORMATS[fmt](d)
     if output:
         output.write_text(text)
         console.print(f"wrote {output}")
@@ -364,28 +302,24 @@ def dag(
 
 
 @app.command()
+@with_target
 def show(
     stage: Annotated[str, typer.Argument(help="stage name")],
+    target: Target,
     key: Annotated[str | None, typer.Option(help="output key (default: latest)")] = None,
-    pipeline: PipelineOpt = "face",
-    config: ConfigOpt = None,
-    set_: SetOpt = None,
-    dataset: DatasetOpt = None,
 ) -> None:
     """Provenance of a stage's latest (or given) output, and the arrays it holds."""
-    d = _pipeline(pipeline)
-    _stage(d, stage)
-    cfg = load(d, config, set_, dataset)
-    store = _store(cfg, create=False)
+    _stage(target.pipeline, stage)
+    store = target.store(create=False)
     if key is not None:
         matches = [k for k in store.all_keys(stage) if k.startswith(key)]
         if len(matches) != 1:
-            raise _fail(f"key prefix {key!r} matches {len(matches)} outputs of {stage}")
+            raise fail(f"key prefix {key!r} matches {len(matches)} outputs of {stage}")
         key = matches[0]
     try:
         group = store.open(stage, key)
     except StageOutputMissing as exc:
-        raise _fail(str(exc), 1) from None
+        raise fail(str(exc), 1) from None
     info = dict(group.attrs)
     manifest = info.pop("manifest", {})
     info["files"] = {"count": len(manifest), "bytes": sum(size for size, _ in manifest.values())}
@@ -398,19 +332,16 @@ def show(
 
 
 @app.command()
+@with_target
 def clean(
-    pipeline: PipelineOpt = "face",
-    config: ConfigOpt = None,
-    set_: SetOpt = None,
-    dataset: DatasetOpt = None,
+    target: Target,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="list only")] = False,
 ) -> None:
     """Remove outputs that neither this config, the latest run nor any complete run (the
     report's variants) uses, with everything they were computed from kept; also damaged and
     quarantined outputs and abandoned partial ones."""
-    d = _pipeline(pipeline)
-    cfg = load(d, config, set_, dataset)
-    store, entries = _plan(d, cfg, None, None, None, create=False)
+    d = target.pipeline
+    store, entries = _plan(target, create=False)
     store.adopt_unrecorded(d.name, [s.name for s in d.stages])  # a store from before runs
     latest = store.latest_run_name()
     kept_runs = [r for r in store.runs() if r.name == latest or r.info.get("complete")]
@@ -459,9 +390,8 @@ def demo(
 ) -> None:
     """Generate the demo dataset (virtual actor from a real scan, bag, RGBD, stereo, truth)."""
     from physanim.capture.demo import generate_demo
-    from physanim.pipeline.progress import rich_progress
 
-    cfg = load(_pipeline("face"), config, set_, None)
+    cfg = load(get_pipeline("face"), config, set_, None)
     target = out or cfg.dataset.path  # type: ignore[attr-defined]
     if target.exists() and not force:
         console.print(f"{target} exists (use --force to regenerate)")
@@ -478,10 +408,9 @@ def check(
     set_: SetOpt = None,
 ) -> None:
     """Read a dataset's recording and print what it holds, or each problem and its fix."""
-    from physanim.capture.check import check_dataset
-    from physanim.pipeline.progress import rich_progress
+    from physanim.tracking.dataset_check import check_dataset
 
-    cfg = load(_pipeline("face"), config, set_, dataset)
+    cfg = load(get_pipeline("face"), config, set_, dataset)
     path, track = cfg.dataset.path, cfg.track  # type: ignore[attr-defined]
     with rich_progress(console) as progress:
         report = check_dataset(
@@ -507,25 +436,24 @@ def sweep(
     serial: Annotated[bool, typer.Option(help="no Dask: one job after another here")] = False,
 ) -> None:
     """Run a parameter sweep; stages shared between variants are computed once."""
-    from flows.dags import get_pipeline
     from physanim.pipeline.sweep import plan_sweep
 
     _tidy_up()
     try:  # every variant is valid and planned before anything starts
         plan = plan_sweep(file, get_pipeline, prepare=_prepare)
     except (ConfigError, ValueError) as exc:  # an invalid variant, an unknown pipeline
-        raise _fail(str(exc)) from None
+        raise fail(str(exc)) from None
     for job in plan.jobs:
         _quarantine(StageStore(job.store), [job.entry])
     from flows.prefect_env import configure
 
-    configure(plan.run_dir)
+    configure(plan.run_dir)  # before Prefect is imported
     from flows.sweep import run_sweep
 
     try:
         outcome = run_sweep(plan, dask_address=dask_address, workers=workers, serial=serial)
     except ValueError as exc:  # a scheduler that does not answer, workers it cannot serve
-        raise _fail(str(exc)) from None
+        raise fail(str(exc)) from None
     for r in outcome.results:
         _log_result(r)
     table = Table(
@@ -558,7 +486,7 @@ def serve(
         raise typer.BadParameter("give exactly one of --interval or --cron")
     if not datasets.is_dir():
         raise typer.BadParameter(f"{datasets} is not a directory")
-    _pipeline(pipeline)
+    get_pipeline(pipeline)
     _tidy_up()
     from flows.prefect_env import configure, prefect_server
 
@@ -619,5 +547,5 @@ def main() -> None:
     except Exception as exc:
         if DEBUG:
             raise
-        _fail(_describe(exc))
+        fail(_describe(exc))
         sys.exit(1)

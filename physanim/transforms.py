@@ -1,4 +1,8 @@
-"""Weighted least-squares similarity / rigid transforms in 2D or 3D (Umeyama 1991)."""
+"""Weighted least-squares similarity / rigid transforms in 2D or 3D (Umeyama 1991).
+
+The one home of the rigid / similarity-transform helpers shared by tracking, face and mesh
+(bottom layer of the library: imports numpy only).
+"""
 
 from __future__ import annotations
 

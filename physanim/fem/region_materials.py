@@ -1,4 +1,7 @@
-"""Per-tet material constants from region labels and a materials file (:class:`MaterialModel`)."""
+"""Per-tet material constants from region labels and a materials file (:class:`MaterialModel`).
+
+The bridge from the mesh layer's regions to the FEM's :class:`TetMaterials`.
+"""
 
 from __future__ import annotations
 

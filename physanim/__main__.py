@@ -1,5 +1,0 @@
-"""``python -m physanim`` runs the CLI."""
-
-from physanim.cli import main
-
-main()

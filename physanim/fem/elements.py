@@ -1,0 +1,88 @@
+"""Element formulations of the 4-node tet: how the stiffness is assembled from the moduli.
+
+An element is a small object whose ``stiffness`` turns per-tet moduli into the assembled
+stiffness; ``ELEMENTS`` maps ``SimulateParams.formulation`` names onto them. Thick-walled
+cylinder accuracy of both: :mod:`physanim.fem` (package docstring).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from physanim.fem.assembly import (
+    assemble,
+    deviatoric_matrix,
+    element_blocks,
+    nodal_average,
+    nodal_divergence,
+    nodal_volumes,
+    volumetric_matrix,
+)
+
+
+@dataclass(frozen=True)
+class Stiffness:
+    """K (3N, 3N) N/m; ``k_blocks`` (M, 12, 12) element blocks and their assembly K_el; with
+    averaged nodal pressure K = K_el + G^T diag(w_vol) G (G (N, 3N), S (N, M), w_vol (N,) N m),
+    else G, S, w_vol are None and K = K_el."""
+
+    K: sp.csr_matrix
+    K_el: sp.csr_matrix
+    k_blocks: np.ndarray
+    G: sp.csr_matrix | None = None
+    S: sp.csr_matrix | None = None
+    w_vol: np.ndarray | None = None
+
+
+class Element(ABC):
+    """A tet element formulation; ``name`` is its ``SimulateParams.formulation`` value."""
+
+    name: str
+
+    @abstractmethod
+    def stiffness(
+        self,
+        B: np.ndarray,
+        grads: np.ndarray,
+        volumes: np.ndarray,
+        tets: np.ndarray,
+        n_nodes: int,
+        mu: np.ndarray,
+        kappa: np.ndarray,
+    ) -> Stiffness:
+        """Stiffness from strain-displacement B (M, 6, 12), shape gradients (M, 4, 3) 1/m,
+        volumes (M,) m^3, tets (M, 4) and shear / bulk moduli mu, kappa (M,) Pa."""
+
+
+class PlainTet(Element):
+    """Plain 4-node tet: isotropic elasticity per tet (locks near nu = 0.5, as the seed)."""
+
+    name = "p1"
+
+    def stiffness(self, B, grads, volumes, tets, n_nodes, mu, kappa) -> Stiffness:
+        k_blocks = element_blocks(B, volumes, deviatoric_matrix(mu) + volumetric_matrix(kappa))
+        K = assemble(k_blocks, tets, n_nodes)
+        return Stiffness(K=K, K_el=K, k_blocks=k_blocks)
+
+
+class AveragedNodalPressureTet(Element):
+    """4-node tet with averaged nodal pressure: the volumetric strain averaged at nodes
+    (K = K_dev + G^T diag(kappa_n V_n) G, same DOFs, SPD, locking-free near nu = 0.5)."""
+
+    name = "anp"
+
+    def stiffness(self, B, grads, volumes, tets, n_nodes, mu, kappa) -> Stiffness:
+        k_blocks = element_blocks(B, volumes, deviatoric_matrix(mu))
+        K_el = assemble(k_blocks, tets, n_nodes)
+        S = nodal_average(tets, volumes, n_nodes)
+        G = nodal_divergence(grads, tets, S)
+        w_vol = nodal_volumes(tets, kappa * volumes, n_nodes)  # kappa_n V_n, volume-averaged
+        K = (K_el + G.T @ sp.diags(w_vol) @ G).tocsr()
+        return Stiffness(K=K, K_el=K_el, k_blocks=k_blocks, G=G, S=S, w_vol=w_vol)
+
+
+ELEMENTS: dict[str, Element] = {e.name: e for e in (PlainTet(), AveragedNodalPressureTet())}

@@ -1,0 +1,162 @@
+"""Newmark substeps between capture frames (fixed, or adaptive by step doubling) and the
+state they start from.
+
+Adaptive frames are computed from the same state in n and 2n substeps (n = 1, 2, 4, ...); the
+finer result is kept and its error estimated as |d_2n - d_n| / (r^2 - 1) (Richardson, second
+order); a frame over the tolerance is redone with twice the substeps, a frame far below it
+lets the next one try half (see ``SimulateParams.stepping``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import OrderedDict
+
+import numpy as np
+import scipy.sparse as sp
+
+from physanim.fem.boundary import BoundaryConditions, SpringForce
+from physanim.fem.newmark import Newmark, State
+from physanim.fem.params import SimulateParams
+from physanim.fem.statics import solve_static
+
+
+class SimulationDiverged(RuntimeError):
+    """The time integration produced NaN/Inf or an exploding energy."""
+
+
+def substep_levels(frame_dt: float, params: SimulateParams, adaptive_ok: bool) -> list[int]:
+    """Substeps per frame to choose from: [n_max] when fixed, else 1, 2, 4, ... and n_max
+    (n_max = ceil(frame_dt / params.dt)); adaptive frames pair level i and i + 1."""
+    n_max = max(1, math.ceil(frame_dt / params.dt - 1e-9))
+    if not (params.stepping == "adaptive" and adaptive_ok and n_max > 1):
+        return [n_max]
+    return sorted({min(2**i, n_max) for i in range(n_max.bit_length() + 1)})
+
+
+def initial_state(
+    integ: Newmark,
+    stiffness: sp.csr_matrix,
+    bc: BoundaryConditions,
+    force: SpringForce | None,
+    solver: str,
+) -> State:
+    """The state at frame 0: static equilibrium (``stiffness`` (n, n) N/m) for the first
+    prescribed displacements and spring forces, the prescribed velocity and acceleration,
+    and the free DOFs' acceleration from the equation of motion when anything moves."""
+    n_dofs, pres = stiffness.shape[0], bc.prescribed_dofs
+    state = State.rest(n_dofs)
+    d_c, v_c, a_c = (x[0] for x in bc.prescribed(np.zeros(1)))
+    f0 = None if force is None else force.full(0.0, n_dofs)
+    loaded = f0 is not None and bool(np.any(f0))
+    if np.any(d_c) or loaded:
+        state.d[:] = solve_static(stiffness, pres, d_c, f0, solver=solver)
+    state.v[pres], state.a[pres] = v_c, a_c
+    if np.any(v_c) or np.any(a_c) or loaded:
+        integ.initial_acceleration(state, f0)
+    return state
+
+
+class IntegratorCache:
+    """Newmark integrators by substeps per frame; the least recently used beyond ``size``
+    is dropped (its factor freed). ``seconds``: time spent factorising after the first."""
+
+    def __init__(self, first: Newmark, n_sub: int, frame_dt: float, size: int) -> None:
+        self._items: OrderedDict[int, Newmark] = OrderedDict({n_sub: first})
+        self._template, self._frame_dt, self._size = first, frame_dt, size
+        self.seconds = 0.0
+
+    def get(self, n_sub: int) -> Newmark:
+        if n_sub in self._items:
+            self._items.move_to_end(n_sub)
+            return self._items[n_sub]
+        t0 = time.perf_counter()
+        integ = self._template.with_dt(self._frame_dt / n_sub)
+        self.seconds += time.perf_counter() - t0
+        self._items[n_sub] = integ
+        while len(self._items) > self._size:
+            self._items.popitem(last=False)
+        return integ
+
+
+class FrameStepper:
+    """Advances a :class:`State` from frame k - 1 to frame k under boundary conditions ``bc``
+    and optional spring ``force``. Counts per run: ``substeps`` (T,) substeps that led to
+    each frame, ``check_steps`` (steps computed and discarded), ``over`` (frames whose error
+    stayed above the tolerance at the smallest step allowed)."""
+
+    def __init__(
+        self,
+        integrators: IntegratorCache,
+        levels: list[int],
+        bc: BoundaryConditions,
+        force: SpringForce | None,
+        error_tol_m: float,
+    ) -> None:
+        self.integrators, self.levels, self.bc, self.force = integrators, levels, bc, force
+        self.tol = error_tol_m
+        self.level = 0
+        self.substeps = np.zeros(bc.n_frames, dtype=np.int64)
+        self.check_steps = 0
+        self.over = 0
+
+    @property
+    def adaptive(self) -> bool:
+        return len(self.levels) > 1
+
+    def current(self) -> Newmark:
+        """The integrator of the current level's substeps."""
+        return self.integrators.get(self.levels[self.level])
+
+    def advance(self, state: State, k: int, n_sub: int, heat_too: bool = True) -> float:
+        """Steps from frame k - 1 to frame k in n_sub substeps; returns the dissipation, J
+        (0 unless ``heat_too``)."""
+        frame_dt = self.bc.frame_dt
+        integ, h = self.integrators.get(n_sub), frame_dt / n_sub
+        times = (k - 1) * frame_dt + h * np.arange(1, n_sub + 1)
+        dd, vv, aa = self.bc.prescribed(times)
+        ff = None if self.force is None else self.force.free(times)
+        heat = 0.0
+        for j in range(n_sub):
+            d_old = state.d.copy()
+            integ.step(state, dd[j], vv[j], aa[j], None if ff is None else ff[j])
+            if not np.isfinite(state.d).all():
+                node = int(np.abs(d_old).reshape(-1, 3).max(axis=1).argmax())
+                raise SimulationDiverged(
+                    f"frame {k}, substep {j + 1} of {n_sub} (t = {times[j]:.6g} s): "
+                    f"displacement became NaN/Inf; largest displacement before it "
+                    f"{np.abs(d_old).max():.3e} m at node {node}; reduce params.dt or "
+                    "check materials"
+                )
+            if heat_too:
+                heat += integ.dissipation(state.d - d_old)
+        return heat
+
+    def frame(self, state: State, k: int) -> float:
+        """Advance ``state`` to frame k; returns the viscous dissipation of the step, J."""
+        if not self.adaptive:
+            self.substeps[k] = self.levels[0]
+            return self.advance(state, k, self.levels[0])
+        levels = self.levels
+        saved = (state.d.copy(), state.v.copy(), state.a.copy())
+        while True:
+            coarse, fine = levels[self.level], levels[self.level + 1]
+            self.advance(state, k, coarse, heat_too=False)
+            d_coarse = state.d.copy()
+            state.d[:], state.v[:], state.a[:] = saved
+            heat = self.advance(state, k, fine)
+            ratio = fine / coarse
+            error = float(np.abs(state.d - d_coarse).max()) / (ratio**2 - 1)
+            if error <= self.tol or self.level + 2 == len(levels):
+                self.over += error > self.tol
+                break
+            state.d[:], state.v[:], state.a[:] = saved
+            self.check_steps += coarse + fine
+            self.level += 1
+        # local error ~ dt^3: next frame a coarser pair when it would stay in tol / 2
+        if self.level > 0 and error * (coarse / levels[self.level - 1]) ** 3 < self.tol / 2:
+            self.level -= 1
+        self.substeps[k] = fine
+        self.check_steps += coarse
+        return heat
