@@ -55,8 +55,9 @@ def demo_inputs() -> tuple[dict[str, Any], SimulateStageParams]:
         read_dataclass(FACE.stage(s).output, store.open(s, key[s]))  # type: ignore[arg-type]
         for s in ("track", "align", "tetra", "materials")
     ]
-    args, _ = simulate_inputs(*outputs, config.simulate)  # type: ignore[attr-defined]
-    return args, config.simulate  # type: ignore[attr-defined]
+    params = config.section("simulate", SimulateStageParams)
+    args, _ = simulate_inputs(*outputs, params)
+    return args, params
 
 
 def time_steps(model, pres, dt, solver, n_steps):

@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from pydantic import BaseModel
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
@@ -44,6 +43,7 @@ from physanim.pipeline import (
     Executor,
     LocalExecutor,
     Pipeline,
+    PipelineConfig,
     PlanEntry,
     ProgressFactory,
     StageFailed,
@@ -178,20 +178,22 @@ def run(
     )
 
 
-def _executor(dag: Pipeline, cfg: BaseModel, progress: ProgressFactory, *, local: bool) -> Executor:
+def _executor(
+    dag: Pipeline, cfg: PipelineConfig, progress: ProgressFactory, *, local: bool
+) -> Executor:
     """This process's executor (``local``: no Prefect is imported), else a Prefect flow
     reporting to the run directory's shared Prefect server."""
     if local:
         return LocalExecutor(progress)
     from flows.prefect_env import configure
 
-    home = configure(cfg.dataset.run_dir)  # type: ignore[attr-defined]  (before Prefect loads)
+    home = configure(cfg.dataset.run_dir)  # (before Prefect loads)
     from flows.executors import PrefectExecutor
 
     return PrefectExecutor(home, name=f"physanim-{dag.name}", progress=progress)
 
 
-def _prepare(dag: Pipeline, cfg: BaseModel) -> None:
+def _prepare(dag: Pipeline, cfg: PipelineConfig) -> None:
     """Make what the pipeline needs before it can be planned (the demo dataset), saying so."""
     if dag.prepare is not None:
         with rich_progress(console) as progress:
@@ -237,7 +239,7 @@ def status(
     ] = False,
 ) -> None:
     """Dry run: for each stage, cached, will run or damaged, and why (writes nothing)."""
-    data = target.config.dataset.path  # type: ignore[attr-defined]
+    data = target.config.dataset.path
     if not data.exists():
         console.print(f"note: dataset directory {data} does not exist", highlight=False)
     _, entries = _plan(target, only, start, force, create=False, checksums=verify)
@@ -390,14 +392,16 @@ def demo(
 ) -> None:
     """Generate the demo dataset (virtual actor from a real scan, bag, RGBD, stereo, truth)."""
     from physanim.capture.demo import generate_demo
+    from physanim.capture.params import DemoParams
 
     cfg = load(get_pipeline("face"), config, set_, None)
-    target = out or cfg.dataset.path  # type: ignore[attr-defined]
+    target = out or cfg.dataset.path
     if target.exists() and not force:
         console.print(f"{target} exists (use --force to regenerate)")
         raise typer.Exit(0)
     with rich_progress(console) as progress:
-        made = generate_demo(target, params=cfg.demo, progress=progress("demo dataset"))  # type: ignore[attr-defined]
+        demo = cfg.section("demo", DemoParams)
+        made = generate_demo(target, params=demo, progress=progress("demo dataset"))
     console.print(f"generated {made}")
 
 
@@ -408,17 +412,19 @@ def check(
     set_: SetOpt = None,
 ) -> None:
     """Read a dataset's recording and print what it holds, or each problem and its fix."""
+    from physanim.capture.params import IngestParams
     from physanim.tracking.dataset_check import check_dataset
+    from tasks.track import TrackStageParams
 
     cfg = load(get_pipeline("face"), config, set_, dataset)
-    path, track = cfg.dataset.path, cfg.track  # type: ignore[attr-defined]
+    path, track = cfg.dataset.path, cfg.section("track", TrackStageParams)
     with rich_progress(console) as progress:
         report = check_dataset(
             path,
-            cfg.ingest,
+            cfg.section("ingest", IngestParams),
             track,
             path / track.template,
-            progress("reading " + str(path)),  # type: ignore[attr-defined]
+            progress("reading " + str(path)),
         )
     print(f"{path}:")
     for line in report.lines():

@@ -14,12 +14,11 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from pydantic import BaseModel
 from rich.console import Console
 from rich.markup import escape
 
 from physanim.config import ConfigError, load_config
-from physanim.pipeline import Pipeline
+from physanim.pipeline import Pipeline, PipelineConfig
 from physanim.pipeline.spec import dataset_overrides
 from physanim.store import StageStore
 
@@ -64,7 +63,7 @@ def overrides(dataset: str | None, sets: list[str] | None) -> list[str]:
 
 def load(
     pipeline: Pipeline, configs: list[Path] | None, sets: list[str] | None, dataset: str | None
-) -> BaseModel:
+) -> PipelineConfig:
     """Validated config of ``pipeline``: default file, ``-c`` files, dataset, ``--set``."""
     files = [pipeline.default_config, *(configs or [])]
     try:
@@ -80,14 +79,14 @@ class Target:
     overrides (dataset, then ``--set``) it was loaded from."""
 
     pipeline: Pipeline
-    config: BaseModel
+    config: PipelineConfig
     configs: list[Path]
     overrides: list[str]
 
     def store(self, *, create: bool = True) -> StageStore:
         """The config's stage store; ``create=False`` for commands that only read (nothing
         is created, not even a missing dataset directory)."""
-        return StageStore(self.config.dataset.store_path, create=create)  # type: ignore[attr-defined]
+        return StageStore(self.config.dataset.store_path, create=create)
 
 
 def with_target(command: Callable[..., Any]) -> Callable[..., Any]:

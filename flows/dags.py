@@ -2,8 +2,9 @@
 
 Each stage lives in ``tasks/<stage>.py`` (its StageSpec: name, upstream, params model, code
 version, compute function).  Stages that are not implemented yet are simply absent.  This module
-does not import Prefect (planning and ``status`` never need it); ``pipeline_flow`` runs any of
-these DAGs as a Prefect flow named ``physanim-<dag>``, one task per stage.
+does not import Prefect (planning and ``status`` never need it); ``flows.executors``'
+``PrefectExecutor`` runs any of these DAGs as a Prefect flow named ``physanim-<dag>``, one task
+per stage (``DaskExecutor``: on a Dask cluster).
 """
 
 from __future__ import annotations

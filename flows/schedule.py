@@ -39,7 +39,7 @@ def batch_flow(
                 [dag.default_config, *(configs or [])],
                 dataset_overrides(str(d)),
             )
-            store = StageStore(cfg.dataset.store_path)  # type: ignore[attr-defined]
+            store = StageStore(cfg.dataset.store_path)
             executor = PrefectExecutor(None, name=f"physanim-{dag.name}-{d.name}")
             results = run_plan(executor, dag, cfg, make_plan(dag, cfg, store))
             ran = [r.stage for r in results if r.action == "ran"]

@@ -93,56 +93,23 @@ def compute(
     ctx: StageContext[AlignStageParams],
 ) -> AlignOutput:
     """Scan prep, alignment of the motion mesh to the scan, lip seam, binding, kinematic scan."""
-    from physanim.face.landmarks import FEATURE_POINTS
-    from physanim.face.model import mouth_line_points
-    from physanim.mesh.align import align_motion_mesh
-    from physanim.mesh.kinematic import animate_bound_points
-    from physanim.mesh.remesh import prepare_scan
-    from physanim.mesh.scan_io import clean_scan, load_scan
-    from physanim.mesh.seam import MouthLine, bind_across_seam, cut_surface
-    from physanim.names import name_index
+    from physanim.face.scan import bind_scan, load_raw_scan
 
-    if params.scan == "face000":
-        from physanim.capture.actor import build_actor
-
-        actor = build_actor()
-        raw_v, raw_f = actor.vertices, actor.faces
-    else:
-        raw_v, raw_f = clean_scan(*load_scan(Path(params.scan), params.scan_units))
-    scan_v, scan_f = prepare_scan(
-        raw_v, raw_f, params.remesh_edge_length_m, params.remesh_iterations,
-        params.notch_max_gap_m, params.notch_min_depth_m,
+    raw_v, raw_f = load_raw_scan(params.scan, params.scan_units)
+    scan = bind_scan(
+        raw_v, raw_f, track.landmark_names, track.template, fit.motion, fit.triangles,
+        fit.vertex_names, params, ctx.progress("align"),
     )  # fmt: skip
-
-    features = [n for n in FEATURE_POINTS if n in track.landmark_names]
-    scan_lms = track.template[name_index(track.landmark_names, features)]
-    lm_vertices = name_index(fit.vertex_names, features)
-    alignment = align_motion_mesh(
-        fit.motion[0], fit.triangles, lm_vertices, scan_v, scan_f, scan_lms,
-        int(name_index(features, ["pronasale"])[0]), params, ctx.progress("align"),
-    )  # fmt: skip
-    aligned = alignment.apply(fit.motion)
-    # the lip seam: the fitted model's mouth slit, else the line through the mouth corners
-    line = mouth_line_points(aligned[0], fit.vertex_names)
-    if line is None:
-        line = scan_lms[name_index(features, ["ch_R", "ch_L"])]
-    mouth = MouthLine(line, params.lip_band_m)
-    cut = cut_surface(scan_v, scan_f, mouth)
-    scan_v, scan_f = cut.nodes(scan_v), cut.elements
-    binding = bind_across_seam(
-        scan_v, cut.side, aligned[0], fit.triangles, mouth, params.binding_candidates
-    )
-    kinematic = animate_bound_points(scan_v, binding, fit.triangles, aligned)
     ctx.summary.update(
-        scan_vertices=len(scan_v),
-        scan_faces=len(scan_f),
-        lip_seam_edges=cut.n_seam_faces,
-        median_binding_distance_mm=round(float(np.median(binding.distance)) * 1e3, 3),
+        scan_vertices=len(scan.vertices),
+        scan_faces=len(scan.faces),
+        lip_seam_edges=scan.seam_faces,
+        median_binding_distance_mm=round(float(np.median(scan.binding.distance)) * 1e3, 3),
     )
     return AlignOutput(
-        scan_v, scan_f, cut.side, cut.parent, mouth.points, aligned.astype(np.float32),
-        fit.triangles, lm_vertices, scan_lms, binding, kinematic.astype(np.float32),
-        features, params.lip_band_m,
+        scan.vertices, scan.faces, scan.side, scan.parent, scan.mouth.points,
+        scan.motion.astype(np.float32), fit.triangles, scan.landmark_vertices, scan.landmarks,
+        scan.binding, scan.kinematic.astype(np.float32), scan.landmark_names, params.lip_band_m,
     )  # fmt: skip
 
 

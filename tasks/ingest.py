@@ -100,19 +100,12 @@ def ensure_demo(config: PipelineConfig, progress: ProgressFactory | None = None)
     Returns the generated directory, or None when nothing had to be done.
     """
     from physanim.capture.demo import generate_demo
+    from physanim.capture.ingest import has_recording
+    from physanim.capture.params import DemoParams
 
     dataset = config.dataset
-    if dataset.name != "demo" or _has_recording(dataset.path):
+    if dataset.name != "demo" or has_recording(dataset.path):
         return None
     report = progress("demo dataset") if progress else None
-    return generate_demo(dataset.path, params=config.demo, progress=report)  # type: ignore[attr-defined]
-
-
-def _has_recording(path: Path) -> bool:
-    from physanim.capture.ingest import find_source
-
-    try:
-        find_source(path)
-    except (FileNotFoundError, ValueError):
-        return False
-    return True
+    demo = config.section("demo", DemoParams)
+    return generate_demo(dataset.path, params=demo, progress=report)

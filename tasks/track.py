@@ -77,46 +77,25 @@ def compute(
 
     Refuses tracks with nothing lifted to 3D or a face of the wrong size (``check_tracks``);
     its warnings go to the summary."""
-    import warnings
-
-    from physanim.face.landmarks import FEATURE_POINTS
-    from physanim.tracking.checks import check_tracks
-    from physanim.tracking.template import load_marker_template
+    from physanim.tracking.recording import track_recording
 
     tracking = TrackParams.model_validate(
         params.model_dump(exclude={"template", "lift", "stereo_dir"})
     )
-    fps = float(ingest.fps)
-    progress = ctx.progress("track")
-    if params.backend == "markerless":
-        from physanim.tracking.markerless import feature_template, track_markerless_rgbd
-
-        names, template = list(FEATURE_POINTS), feature_template()
-        frames = (ingest.color[...], ingest.depth[...], ingest.K)
-        tracks = track_markerless_rgbd(*frames, fps, tracking, progress)
-    elif params.lift == "stereo":
-        from physanim.tracking.stereo_track import read_stereo_pairs, track_markers_stereo
-
-        names, template = load_marker_template(ctx.dataset_dir / params.template)
-        lefts, rights, calib = read_stereo_pairs(ctx.dataset_dir / params.stereo_dir)
-        tracks = track_markers_stereo(lefts, rights, calib, template, fps, tracking, progress)
-    else:
-        from physanim.tracking.track import track_markers_rgbd
-
-        names, template = load_marker_template(ctx.dataset_dir / params.template)
-        frames = (ingest.color[...], ingest.depth[...], ingest.K)
-        tracks = track_markers_rgbd(*frames, template, fps, tracking, progress)
-    what = "the face model" if params.backend == "markerless" else f"the template {params.template}"
-    problems = check_tracks(tracks, template, params.backend, what)
-    for message in problems:
-        warnings.warn(message, UserWarning, stacklevel=1)
-    seen = tracks.confidence > 0
+    found = track_recording(
+        ingest.color, ingest.depth, ingest.K, float(ingest.fps), tracking, params.lift,
+        ctx.dataset_dir / params.template, ctx.dataset_dir / params.stereo_dir,
+        ctx.progress("track"),
+    )  # fmt: skip
+    tracks = found.tracks
     ctx.summary.update(
-        markers=len(names), tracked_fraction=round(float(seen.mean()), 4), warnings=problems
+        markers=len(found.names),
+        tracked_fraction=round(float((tracks.confidence > 0).mean()), 4),
+        warnings=found.problems,
     )
     return TrackOutput(
-        tracks.uv, tracks.points, tracks.confidence, tracks.head_pose, template, list(names),
-        fps, params.backend, params.lift,
+        tracks.uv, tracks.points, tracks.confidence, tracks.head_pose, found.template,
+        found.names, float(ingest.fps), params.backend, params.lift,
     )  # fmt: skip
 
 

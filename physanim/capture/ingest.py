@@ -71,6 +71,15 @@ def find_source(dataset_dir: Path, source: str = "auto") -> tuple[str, Path]:
     )
 
 
+def has_recording(dataset_dir: Path) -> bool:
+    """Whether ``dataset_dir`` holds a recording ``find_source`` finds (any kind)."""
+    try:
+        find_source(dataset_dir)
+    except (FileNotFoundError, ValueError):
+        return False
+    return True
+
+
 def source_files(kind: str, path: Path) -> list[Path]:
     """Exactly the files ingest reads for the source ``(kind, path)`` of ``find_source``:
     the bag; or the calibration file and the frame images (never anything else in the

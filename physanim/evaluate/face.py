@@ -191,8 +191,7 @@ def _against_truth(
         motion_fidelity,
     )
     from physanim.evaluate.measures import surface_errors
-    from physanim.mesh.embed import embedding_matrix
-    from physanim.mesh.kinematic import blend_frames
+    from physanim.mesh.embed import embedded_displacements
 
     disp, nodes, tets, mouth = run.displacements, run.nodes, run.tets, run.mouth
     landmarks = dict(zip(run.landmark_names, run.landmarks, strict=True))
@@ -201,14 +200,13 @@ def _against_truth(
     rng = np.random.default_rng(0)
     scan_idx = np.sort(rng.choice(len(scan_v), min(len(scan_v), params.error_max_points), False))
     lips = list(lip_midline_points(mouth, scan_v, scan_side, params.lip_offset_m))
-    embed = embedding_matrix(  # the FEM moves the lip points as it moves the rendered scan
-        scan_v[lips], scan_side[lips], nodes, tets, mouth.side(nodes[tets].mean(axis=1))
-    )
+    # the FEM moves the lip points as it moves the rendered scan
+    fem_lips = embedded_displacements(scan_v[lips], scan_side[lips], nodes, tets, mouth, disp)
     true_lips = follow_truth(scan_v[lips], truth.vertices, truth.faces).displacement
     true_gap = lip_gap(*(scan_v[lips][None] + true_lips).transpose(1, 0, 2))
     kin = run.kinematic
     models = {
-        "fem": (nodes[skin], disp[:, skin], scan_v[lips] + blend_frames(embed, disp)),
+        "fem": (nodes[skin], disp[:, skin], scan_v[lips] + fem_lips),
         "kinematic": (
             scan_v[scan_idx],
             _rows(kin, scan_idx) - scan_v[scan_idx],

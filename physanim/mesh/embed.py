@@ -13,7 +13,8 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from physanim.mesh.seam import NONE
+from physanim.mesh.kinematic import blend_frames
+from physanim.mesh.seam import NONE, MouthLine
 
 
 def embedding_matrix(
@@ -51,3 +52,19 @@ def embedding_matrix(
     return sp.csr_array(
         (weights.ravel(), (np.repeat(rows, 4), tets[chosen].ravel())), shape=(len(p), len(nodes))
     )
+
+
+def embedded_displacements(
+    points: NDArray,
+    point_side: NDArray,
+    nodes: NDArray,
+    tets: NDArray,
+    mouth: MouthLine,
+    displacements: NDArray,
+) -> NDArray:
+    """Displacements (T, N, 3) m of ``points`` (N, 3) m (lip sides ``point_side`` (N,))
+    embedded in a tet mesh (``nodes`` (n, 3) m, ``tets`` (M, 4)) cut along the lip seam
+    ``mouth``, from the node displacements (T, n, 3) m."""
+    tet_side = mouth.side(np.asarray(nodes)[tets].mean(axis=1))
+    w = embedding_matrix(points, point_side, nodes, tets, tet_side)
+    return blend_frames(w, displacements)

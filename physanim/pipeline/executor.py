@@ -16,12 +16,10 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any, Protocol
 
-from pydantic import BaseModel
-
 from physanim.pipeline.context import ProgressFactory
 from physanim.pipeline.plan import PlanEntry
 from physanim.pipeline.runner import StageFailed, StageResult, execute_stage, record_run
-from physanim.pipeline.spec import Pipeline
+from physanim.pipeline.spec import Pipeline, PipelineConfig
 from physanim.store import StageStore
 
 #: (store path, stage, key): one distinct stage execution
@@ -169,7 +167,7 @@ class LocalExecutor(Executor):
 def run_plan(
     executor: Executor,
     pipeline: Pipeline,
-    config: BaseModel,
+    config: PipelineConfig,
     entries: list[PlanEntry],
     on_result: OnResult = None,
     info: Mapping[str, Any] | None = None,
@@ -178,7 +176,7 @@ def run_plan(
     stage failed: what completed is kept; not when the store itself failed); ``info`` goes
     into the run manifest. Returns the cached and ran results in plan order; raises the
     first job's error after every independent job has finished."""
-    store = StageStore(config.dataset.store_path)  # type: ignore[attr-defined]
+    store = StageStore(config.dataset.store_path)
     store.remove_stale_temporaries()
     cached = [
         StageResult(e.stage, e.key, "cached", 0.0, {}) for e in entries if e.action == "cached"
@@ -198,7 +196,7 @@ def run_plan(
 
 def execute_plan_locally(
     pipeline: Pipeline,
-    config: BaseModel,
+    config: PipelineConfig,
     entries: list[PlanEntry],
     progress: ProgressFactory | None = None,
     on_result: OnResult = None,

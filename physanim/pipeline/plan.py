@@ -8,7 +8,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel
 
-from physanim.pipeline.spec import DatasetParams, Pipeline, StageSpec
+from physanim.pipeline.spec import DatasetParams, Pipeline, PipelineConfig, StageSpec
 from physanim.store import StageStore, stage_key
 
 Action = Literal["cached", "run", "skip"]
@@ -73,7 +73,7 @@ def _why(
 
 def make_plan(
     pipeline: Pipeline,
-    config: BaseModel,
+    config: PipelineConfig,
     store: StageStore,
     *,
     only: str | None = None,
@@ -101,7 +101,7 @@ def make_plan(
     for f in force:
         forced.update(pipeline.downstream(pipeline.stage(f).name))
 
-    dataset: DatasetParams = config.dataset  # type: ignore[attr-defined]
+    dataset = config.dataset
     keys: dict[str, str] = {}
     entries: list[PlanEntry] = []
     for spec in pipeline.stages:

@@ -9,11 +9,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from pydantic import BaseModel
-
 from physanim.pipeline.context import ProgressFactory, StageContext, _no_progress
 from physanim.pipeline.plan import PlanEntry
-from physanim.pipeline.spec import Pipeline
+from physanim.pipeline.spec import Pipeline, PipelineConfig
 from physanim.store import StageStore
 
 _HOST = socket.gethostname()
@@ -58,7 +56,7 @@ class StageResult:
 
 def execute_stage(
     pipeline: Pipeline,
-    config: BaseModel | Mapping[str, Any],
+    config: PipelineConfig | Mapping[str, Any],
     entry: PlanEntry,
     progress: ProgressFactory | None = None,
 ) -> StageResult:
@@ -67,10 +65,10 @@ def execute_stage(
     If the output appeared meanwhile (another worker), nothing is recomputed.  A forced stage
     replaces its existing output only once the new one is complete.
     """
-    if not isinstance(config, BaseModel):
+    if not isinstance(config, PipelineConfig):
         config = pipeline.config_model().model_validate(config)
     spec = pipeline.stage(entry.stage)
-    dataset = config.dataset  # type: ignore[attr-defined]
+    dataset = config.dataset
     store = StageStore(dataset.store_path)
     t0, started = time.perf_counter(), time.time()
     if not entry.forced and store.has(spec.name, entry.key):

@@ -49,6 +49,16 @@ class PipelineConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
     dataset: DatasetParams = Field(default_factory=DatasetParams)
 
+    def section(self, name: str, model: type[P]) -> P:
+        """The section ``name`` (a stage's params or an extra section such as ``demo``),
+        checked to be a ``model``; TypeError naming both otherwise."""
+        value = getattr(self, name, None)
+        if not isinstance(value, model):
+            raise TypeError(
+                f"config section {name!r} is {type(value).__name__}, not {model.__name__}"
+            )
+        return value
+
 
 def dataset_overrides(dataset: str) -> list[str]:
     """``--set`` overrides selecting a dataset by name (``data/<name>``) or by directory."""

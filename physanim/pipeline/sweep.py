@@ -30,7 +30,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from physanim.config.loader import ConfigError, load_config, merge_sources, validate
 from physanim.pipeline.executor import Ident, Job, JobGraph, merge_plans
 from physanim.pipeline.plan import PlanEntry, make_plan
-from physanim.pipeline.spec import Pipeline, dataset_overrides
+from physanim.pipeline.spec import Pipeline, PipelineConfig, dataset_overrides
 from physanim.store import StageStore
 
 
@@ -105,7 +105,7 @@ class SweepPlan:
     path: Path
     pipeline: Pipeline
     variants: list[Variant]
-    configs: dict[str, BaseModel]
+    configs: dict[str, PipelineConfig]
     stores: dict[str, str]
     keys: dict[str, dict[str, str]]
     jobs: list[Job]
@@ -118,13 +118,13 @@ class SweepPlan:
     @property
     def run_dir(self) -> Path:
         """Run directory of the first variant's dataset (sweep reports, Prefect home)."""
-        return self.configs[self.variants[0].name].dataset.run_dir  # type: ignore[attr-defined]
+        return self.configs[self.variants[0].name].dataset.run_dir
 
 
 def plan_sweep(
     path: str | Path,
     pipeline_of: Callable[[str], Pipeline],
-    prepare: Callable[[Pipeline, BaseModel], None] | None = None,
+    prepare: Callable[[Pipeline, PipelineConfig], None] | None = None,
 ) -> SweepPlan:
     """Expand a sweep file, validate every variant's config and merge their plans.
 
@@ -136,7 +136,7 @@ def plan_sweep(
     path = Path(path)
     spec, variants = load_sweep(path)
     pipeline = pipeline_of(spec.pipeline)
-    configs: dict[str, BaseModel] = {}
+    configs: dict[str, PipelineConfig] = {}
     plans: dict[str, tuple[str, list[PlanEntry]]] = {}
     for v in variants:
         try:
@@ -150,7 +150,7 @@ def plan_sweep(
         cfg = configs[v.name]
         if prepare is not None:
             prepare(pipeline, cfg)
-        store = StageStore(cfg.dataset.store_path)  # type: ignore[attr-defined]
+        store = StageStore(cfg.dataset.store_path)
         store.remove_stale_temporaries()
         plans[v.name] = (str(store.root), make_plan(pipeline, cfg, store))
     return SweepPlan(

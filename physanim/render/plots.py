@@ -8,9 +8,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib.figure import Figure as MplFigure
+
+if TYPE_CHECKING:
+    from physanim.evaluate.face import FaceEvaluation
+    from physanim.face.jaw import JawMotion
 
 
 def _save(fig: MplFigure, stem: str | Path) -> tuple[Path, Path]:
@@ -207,3 +212,33 @@ def plot_jaw(
     for ax in (a, b):
         ax.grid(alpha=0.3)
     return _save(fig, stem)
+
+
+def plot_face_run(
+    time: np.ndarray,
+    energies: Mapping[str, np.ndarray],
+    jaw: JawMotion | None,
+    evaluation: FaceEvaluation,
+    folder: Path,
+) -> None:
+    """The face run's plots into ``folder``: symmetry cost, mouth corners (tracked,
+    kinematic, FEM), the FEM ``energies`` (name -> (T,) J), the ``jaw`` (None: disabled) and,
+    when the ``evaluation`` has a ground truth, fidelity and lip gap; ``time`` (T,) s."""
+    ev, time = evaluation, np.asarray(time)
+    variants = {"tracked": ev.tracked, "kinematic": ev.kinematic, "fem": ev.fem}
+    plot_symmetry_cost(time, {v: m.cost for v, m in variants.items()}, folder / "symmetry")
+    corners = {v: m.displacement[:, ev.mouth_corners] for v, m in variants.items()}
+    plot_mouth_corners(time, corners, folder / "mouth_corners")
+    plot_energies(time, {"fem": energies}, folder / "energies")
+    if jaw is not None:
+        plot_jaw(time, jaw.angle, jaw.residual_m, folder / "jaw")
+    if ev.lip_gap_truth is not None and ev.fidelity_fem and ev.fidelity_kinematic:
+        fidelity = {"fem": ev.fidelity_fem, "kinematic": ev.fidelity_kinematic}
+        peaks = {k: float(time[v]) for k, v in (ev.peak_frames or {}).items()}
+        plot_fidelity(
+            time, {m: f.overall for m, f in fidelity.items()},
+            {m: f.regions for m, f in fidelity.items()}, list(ev.regions or []),
+            folder / "fidelity", peaks=peaks,
+        )  # fmt: skip
+        gaps = {"truth": ev.lip_gap_truth, "fem": ev.lip_gap_fem, "kinematic": ev.lip_gap_kinematic}
+        plot_lip_gap(time, gaps, folder / "lip_gap")

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from physanim.config import ConfigError, load_config, parse_override
-from tests.foundation.toy_stages import toy_pipeline
+from tests.foundation.toy_stages import ScaleParams, SourceParams, toy_pipeline
 
 
 @pytest.fixture
@@ -28,6 +28,15 @@ def test_merge_order_files_then_overrides(model, toy_config: Path, tmp_path: Pat
     assert origins["scale.factor"] == str(extra)
     cfg, origins = load_config(model, [toy_config, extra], ["scale.factor=6"])
     assert cfg.scale.factor == 6.0 and origins["scale.factor"] == "--set scale.factor=6"
+
+
+def test_section_is_typed_and_names_a_mismatch(model, toy_config: Path) -> None:
+    cfg, _ = load_config(model, [toy_config], ["scale.factor=6"])
+    assert cfg.section("scale", ScaleParams).factor == 6.0
+    with pytest.raises(TypeError, match="'scale' is ScaleParams, not SourceParams"):
+        cfg.section("scale", SourceParams)
+    with pytest.raises(TypeError, match="'demo' is NoneType, not ScaleParams"):
+        cfg.section("demo", ScaleParams)
 
 
 def test_unknown_key_names_file_key_and_allowed(model, toy_config, tmp_path) -> None:

@@ -10,7 +10,7 @@ from physanim.fem.geometry import node_dofs
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.statics import solve_static
-from physanim.mesh.embed import embedding_matrix
+from physanim.mesh.embed import embedded_displacements, embedding_matrix
 from physanim.mesh.params import TetraParams
 from physanim.mesh.seam import (
     _TET_FACES,
@@ -122,6 +122,9 @@ def test_embedding_reproduces_affine_motion_and_respects_the_seam() -> None:
     a = np.array([[0.01, -0.02, 0.005], [0.03, 0.0, -0.01], [0.0, 0.02, 0.01]])
     u = x @ a.T + np.array([1e-3, 0.0, -2e-3])
     np.testing.assert_allclose(w @ u, pts @ a.T + np.array([1e-3, 0.0, -2e-3]), atol=1e-12)
+    frames = embedded_displacements(pts, MOUTH.side(pts), x, t, MOUTH, np.stack([0 * u, u, 2 * u]))
+    np.testing.assert_allclose(frames, np.stack([0 * w @ u, w @ u, 2 * w @ u]), atol=1e-12)
+    np.testing.assert_allclose(frames[2], 2 * (pts @ a.T + [1e-3, 0.0, -2e-3]), atol=1e-12)
     # open the lips: lower side nodes drop; upper-lip points do not follow
     drop = np.where((cut.side == LOWER)[:, None], [0.0, -1e-3, 0.0], 0.0)
     moved = w @ drop

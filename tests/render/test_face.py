@@ -145,7 +145,7 @@ def test_vtk_crash_falls_back_to_numpy(actor, monkeypatch):
 
 def test_tile_cache_renders_each_input_once(actor, tmp_path, monkeypatch):
     import physanim.render.face as face
-    from tasks.render import TileCache
+    from physanim.render.tile_cache import TileCache
 
     calls = []
     real = face.render_sequence

@@ -97,3 +97,34 @@ def test_write_webm_vp8(tmp_path):
     while cap.read()[0]:
         n += 1
     assert n == 5
+
+
+def test_capture_panels_crop_the_face_and_write_every_frame(tmp_path):
+    """The face panel's capture tile is the landmarks' box (+60 %, tile aspect) of every
+    selected frame, read alike from numpy and Zarr; write_panels keeps one PNG per frame."""
+    import zarr
+
+    from physanim.render.face_panel import FaceFootage, capture_panels, write_panels
+
+    colour = np.zeros((4, 240, 320, 3), np.uint8)
+    colour[:, 100:140, 150:170] = 255  # a white face where the landmarks are
+    uv = np.tile([[150.0, 100.0], [170.0, 140.0]], (4, 1, 1))
+    lazy = zarr.create_array(tmp_path / "c.zarr", shape=colour.shape, dtype="uint8")
+    lazy[...] = colour
+    tiles = {"fit": np.full((2, 160, 120, 3), 90, np.uint8)}
+    frames = np.array([0, 2])
+    panels = []
+    for source in (colour, lazy):
+        footage = FaceFootage(source, uv, np.ones((4, 2)), 10.0, *[None] * 9, np.zeros((4, 1, 3)))
+        panels.append(capture_panels(footage, frames, tiles, (120, 160)))
+    assert len(panels[0]) == 2 and all((a == b).all() for a, b in zip(*panels, strict=True))
+    # crop rows 88-152, cols 136-184 (half height 1.6 / 2 * 40 px, width 3/4 of it), scaled
+    # to the tile's 160 rows: 120 columns, the white face in the middle, black beside it
+    first = panels[0][0]
+    assert first.shape == (TITLE_HEIGHT + 160, 120 + 120, 3)
+    assert (first[TITLE_HEIGHT + 80, 60] == 255).all() and (first[TITLE_HEIGHT + 80, 5] == 0).all()
+    video, _ = write_panels(panels[0], frames, tmp_path / "out", 5.0, png_frames=True)
+    assert video.exists() and sorted(p.name for p in (tmp_path / "out" / "frames").iterdir()) == [
+        "0000.png",
+        "0002.png",
+    ]
