@@ -166,21 +166,20 @@ def test_regional_models_act_where_they_are_edited(model_sweep) -> None:
     figures, right >= +5 % and left < 5 %, are measured on the full demo mesh; this coarse
     mesh, re-meshed by fTetWild differently on every run, has a few tets per philtrum
     region: measured +4.4 to +9.5 % right against +2.7 to +5.5 % left.)  The seed's
-    right-side stretch E_R (eq 4.39) moves monotonically with the cphs_R stiffness."""
+    right-side stretch E_R (eq 4.39) is not compared: it is taken between landmarks, which the
+    drive's springs hold to the capture, so the three models' max |E_R| differ by about 1e-4
+    relative (0.08964 +- 0.00001), inside the adaptive stepper's error tolerance."""
     data, variants, _, _ = model_sweep
     store = StageStore(ROOT / data / "runs" / "store.zarr")
-    peak, stretch = {}, {}
+    peak = {}
     for model in ("model1", "model2", "model3"):
         summary = store.provenance("evaluate", variants[model]["evaluate"])["summary"]
         peak[model] = summary["philtrum_peak_mm"]
-        evaluated = store.open("evaluate", variants[model]["evaluate"])
-        stretch[model] = float(np.abs(evaluated["fem/e_right"][...]).max())
-    print("philtrum peaks (mm)", peak, "max |E_R|", stretch)
+    print("philtrum peaks (mm)", peak)
     right = peak["model3"]["right"] / peak["model2"]["right"] - 1.0
     left = abs(peak["model3"]["left"] / peak["model2"]["left"] - 1.0)
     assert right >= 0.02 and right > left
     assert peak["model2"]["right"] < peak["model1"]["right"] < peak["model3"]["right"]
-    assert (stretch["model2"] - stretch["model1"]) * (stretch["model3"] - stretch["model1"]) < 0
 
 
 def test_model_sweep_computes_shared_stages_once(model_sweep, demo_run) -> None:
@@ -261,7 +260,16 @@ def test_seed_drive_prescribes_its_points_and_keeps_the_mouth_shut(seed_run) -> 
 def test_kinematic_target_drive_layers_physics_on_the_kinematic_scan(seed_run) -> None:
     """``-c configs/drives/kinematic.yaml`` (after the seed run, on the same store): every skin
     node with skin area is on a spring towards the kinematic scan, so the FEM skin moves about
-    as well as the kinematic scan during the smile, and better than the seed's."""
+    as well as the kinematic scan during the smile, and better than the seed's.
+
+    fTetWild is not deterministic (even on one thread: 867-1021 nodes for this coarse mesh
+    over four runs of one input), so the coarse FEM's smile error varies from run to run
+    (0.31, 0.32 and 0.36 against the kinematic scan's 0.21-0.22 in three runs; the seed's
+    0.89); the bound against the kinematic scan leaves room for that, the comparison with the
+    seed is the sharp one."""
+    seed_cfg, seed_store = seed_run
+    seed_keys = {e.stage: e.key for e in make_plan(FACE, seed_cfg, seed_store)}
+    seed = seed_store.provenance("evaluate", seed_keys["evaluate"])["summary"]["fidelity"]
     data = seed_run[0].dataset.path.relative_to(ROOT)
     out = physanim(
         "run", "--dataset", str(data), "-c", COARSE, "-c", "configs/drives/kinematic.yaml"
@@ -275,4 +283,7 @@ def test_kinematic_target_drive_layers_physics_on_the_kinematic_scan(seed_run) -
     fidelity = store.provenance("evaluate", keys["evaluate"])["summary"]["fidelity"]
     print("kinematic drive fidelity", fidelity)
     smile = {m: fidelity[m]["smile"]["overall"] for m in ("fem", "kinematic")}
-    assert smile["fem"] < smile["kinematic"] + 0.15, smile
+    smile["seed fem"] = seed["fem"]["smile"]["overall"]
+    print("smile fidelity", smile)
+    assert smile["fem"] < 0.5 * smile["seed fem"], smile
+    assert smile["fem"] < smile["kinematic"] + 0.25, smile
