@@ -123,7 +123,7 @@ def write_dataclass(group: zarr.Group, record: object, prefix: str = "") -> None
         value, name = getattr(record, f.name), stored_name(f)
         if isinstance(value, np.ndarray):
             write_array(target, name, value)
-        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        elif _is_record(value):
             write_dataclass(target, value, name)
         elif isinstance(value, dict) and value and all(map(_is_record, value.values())):
             for k, v in value.items():
