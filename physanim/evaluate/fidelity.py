@@ -48,7 +48,9 @@ def follow_truth(
     bind = BINDERS[search]
     binding = bind(np.asarray(points, dtype=np.float64), truth_vertices[0], truth_faces)
     w = blend_matrix(binding, truth_faces, truth_vertices.shape[1])
-    return TrueMotion(blend_frames(w, truth_vertices - truth_vertices[:1]), binding.distance)
+    used = np.unique(w.indices)  # only the true vertices the points are bound to move them
+    moved = truth_vertices[:, used] - truth_vertices[:1, used]
+    return TrueMotion(blend_frames(w[:, used], moved), binding.distance)
 
 
 def relative_error(u_model: NDArray, u_true: NDArray, min_motion_m: float = 1e-3) -> NDArray:
