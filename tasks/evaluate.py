@@ -3,6 +3,9 @@ performs the capture (``physanim.evaluate.face``), against the dataset's ground 
 
 Version 5: the output is declared by ``FaceEvaluation`` (the landmark names are align's, no
 longer copied here; ``peak_frames`` stored; absent truth measures are null attributes).
+Version 6: the truth comparison's closest points come from Open3D's BVH search
+(``evaluate.closest_points``, issue #20): the same figures within 1e-6, the stored arrays
+differ in the last digits.
 """
 
 from __future__ import annotations
@@ -11,7 +14,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from physanim.evaluate.face import EvaluateParams, FaceEvaluation
+from physanim.evaluate.face import EvaluateParams, FaceEvaluation, FaceRun
 from physanim.pipeline import DatasetParams, StageContext, StageSpec
 from tasks.align import AlignOutput
 from tasks.materials import MaterialsOutput
@@ -32,26 +35,22 @@ def fingerprint(dataset: DatasetParams, params: EvaluateParams) -> Mapping[str, 
     return {"truth": files_fingerprint(files, dataset.path)}
 
 
-def compute(
-    params: EvaluateParams,
+def face_run(
     track: TrackOutput,
     align: AlignOutput,
     tetra: TetraOutput,
     materials: MaterialsOutput,
     simulate: SimulateOutput,
-    ctx: StageContext[EvaluateParams],
-) -> FaceEvaluation:
-    """Measures per variant (fem, kinematic, tracked); philtrum peaks; with truth: fidelity,
-    lip gap and surface distance per frame."""
-    from physanim.evaluate.face import FaceRun, evaluate_face
-    from physanim.evaluate.truth import load_truth
+) -> FaceRun:
+    """What the evaluation reads of the upstream outputs (landmark trajectories of the three
+    variants in the head frame, the tet mesh and its displacements, the scan)."""
     from physanim.face.drive import head_frame
     from physanim.names import name_index
 
     names = align.landmark_names
     disp = simulate.displacements.astype(np.float64)
     stabilised = head_frame(track.points, track.head_pose)
-    run = FaceRun(
+    return FaceRun(
         landmark_names=names,
         landmarks=align.landmarks,
         fem_landmarks=tetra.nodes[tetra.landmark_node] + disp[:, tetra.landmark_node],
@@ -71,8 +70,25 @@ def compute(
         times=simulate.times,
         fps=track.fps,
     )
+
+
+def compute(
+    params: EvaluateParams,
+    track: TrackOutput,
+    align: AlignOutput,
+    tetra: TetraOutput,
+    materials: MaterialsOutput,
+    simulate: SimulateOutput,
+    ctx: StageContext[EvaluateParams],
+) -> FaceEvaluation:
+    """Measures per variant (fem, kinematic, tracked); philtrum peaks; with truth: fidelity,
+    lip gap and surface distance per frame."""
+    from physanim.evaluate.face import evaluate_face
+    from physanim.evaluate.truth import load_truth
+
+    run = face_run(track, align, tetra, materials, simulate)
     path = ctx.dataset_dir / params.truth
-    truth = load_truth(path, disp.shape[0]) if path.exists() else None
+    truth = load_truth(path, run.displacements.shape[0]) if path.exists() else None
     evaluation, summary = evaluate_face(run, truth, params)
     ctx.summary.update(summary)
     return evaluation
@@ -81,7 +97,7 @@ def compute(
 SPEC = StageSpec.typed(
     "evaluate",
     compute,
-    version="5",
+    version="6",
     doc="symmetry cost, mouth corners, lag, philtrum peaks; with truth: motion fidelity per "
     "region, lip gap, surface distance",
     fingerprint=fingerprint,

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from physanim.mesh.binding import bind_points
+from physanim.mesh.binding import BINDERS
 from physanim.mesh.kinematic import blend_frames, blend_matrix
 from physanim.mesh.seam import LOWER, UPPER, MouthLine
 
@@ -36,15 +36,21 @@ class TrueMotion:
     distance: NDArray
 
 
-def follow_truth(points: NDArray, truth_vertices: NDArray, truth_faces: NDArray) -> TrueMotion:
+def follow_truth(
+    points: NDArray, truth_vertices: NDArray, truth_faces: NDArray, search: str = "bvh"
+) -> TrueMotion:
     """Bind ``points`` (N, 3) m to the true surface at frame 0 and follow it.
 
-    ``truth_vertices`` (T, V, 3) m, head-fixed frame; ``truth_faces`` (F, 3).
+    ``truth_vertices`` (T, V, 3) m, head-fixed frame; ``truth_faces`` (F, 3); ``search`` the
+    closest-point search (``physanim.mesh.binding.BINDERS``).
     """
     truth_vertices = np.asarray(truth_vertices, dtype=np.float64)
-    binding = bind_points(np.asarray(points, dtype=np.float64), truth_vertices[0], truth_faces)
+    bind = BINDERS[search]
+    binding = bind(np.asarray(points, dtype=np.float64), truth_vertices[0], truth_faces)
     w = blend_matrix(binding, truth_faces, truth_vertices.shape[1])
-    return TrueMotion(blend_frames(w, truth_vertices - truth_vertices[:1]), binding.distance)
+    used = np.unique(w.indices)  # only the true vertices the points are bound to move them
+    moved = truth_vertices[:, used] - truth_vertices[:1, used]
+    return TrueMotion(blend_frames(w[:, used], moved), binding.distance)
 
 
 def relative_error(u_model: NDArray, u_true: NDArray, min_motion_m: float = 1e-3) -> NDArray:

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from physanim.evaluate.symmetry import displacement_curves, lag_frames, symmetry_cost
-from physanim.mesh.binding import bind_points
+from physanim.mesh.binding import BINDERS
 
 
 @dataclass(frozen=True)
@@ -46,14 +46,17 @@ def surface_errors(
     truth_vertices: NDArray,
     truth_faces: NDArray,
     frames: Sequence[int],
+    search: str = "bvh",
 ) -> list[NDArray]:
     """RMS distance (len(frames),) m of each point set (T, N_i, 3) to the true surface (T, V, 3)
-    per frame; one exact closest-point search per frame serves all the sets."""
+    per frame; one exact closest-point search per frame serves all the sets (``search``: which,
+    ``physanim.mesh.binding.BINDERS``)."""
+    bind = BINDERS[search]
     sizes = np.cumsum([p.shape[1] for p in point_sets])[:-1]
     out: list[list[float]] = [[] for _ in point_sets]
     for t in frames:
         points = np.concatenate([p[t] for p in point_sets])
-        d = bind_points(points, truth_vertices[t], truth_faces).distance
+        d = bind(points, truth_vertices[t], truth_faces).distance
         for rms, part in zip(out, np.split(d, sizes), strict=True):
             rms.append(float(np.sqrt(np.mean(part**2))))
     return [np.asarray(rms) for rms in out]
