@@ -26,33 +26,20 @@ from flows.dags import FACE
 from physanim.config import load_config
 from physanim.evaluate.face import EvaluateParams, FaceEvaluation, evaluate_face
 from physanim.evaluate.truth import load_truth
-from physanim.pipeline import execute_plan_locally, make_plan
+from physanim.pipeline import stage_inputs
 from physanim.pipeline.progress import rich_progress
 from physanim.pipeline.spec import dataset_overrides
-from physanim.store import StageStore, read_dataclass
 from tasks.evaluate import face_run
 
 
 def demo_evaluate(config: Any) -> tuple[EvaluateParams, Any]:
     """The evaluate params of the demo and a function running the stage's computation."""
-    needed = FACE.upstream("evaluate")[:-1]
     with rich_progress() as progress:
-        if FACE.prepare is not None:
-            FACE.prepare(config, progress)
-        store = StageStore(config.dataset.store_path)
-        plan = [e for e in make_plan(FACE, config, store) if e.stage in needed]
-        if any(e.action == "run" for e in plan):
-            print("computing the demo's " + ", ".join(e.stage for e in plan if e.action == "run"))
-        execute_plan_locally(FACE, config, plan, progress)
-    key = {e.stage: e.key for e in plan}
+        inputs = stage_inputs(FACE, config, "evaluate", progress)
     params = config.section("evaluate", EvaluateParams)
 
     def evaluate(p: EvaluateParams) -> tuple[FaceEvaluation, dict[str, Any]]:
-        outputs = [
-            read_dataclass(FACE.stage(s).output, store.open(s, key[s]))  # type: ignore[arg-type]
-            for s in FACE.stage("evaluate").upstream
-        ]
-        run = face_run(*outputs)
+        run = face_run(**inputs)
         truth = load_truth(config.dataset.path / p.truth, run.displacements.shape[0])
         return evaluate_face(run, truth, p)
 

@@ -31,32 +31,19 @@ from physanim.fem.model import build_model
 from physanim.fem.newmark import Newmark, State
 from physanim.fem.params import SimulateParams
 from physanim.fem.simulate import simulate
-from physanim.pipeline import execute_plan_locally, make_plan
+from physanim.pipeline import stage_inputs
 from physanim.pipeline.progress import rich_progress
 from physanim.pipeline.spec import dataset_overrides
-from physanim.store import StageStore, read_dataclass
 from tasks.simulate import SimulateStageParams, simulate_inputs
 
 
 def demo_inputs() -> tuple[dict[str, Any], SimulateStageParams]:
     """``simulate`` arguments and stage parameters of the demo (default config)."""
     config, _ = load_config(FACE.config_model(), [FACE.default_config], dataset_overrides("demo"))
-    needed = FACE.upstream("simulate")[:-1]
     with rich_progress() as progress:
-        if FACE.prepare is not None:
-            FACE.prepare(config, progress)
-        store = StageStore(config.dataset.store_path)
-        plan = [e for e in make_plan(FACE, config, store) if e.stage in needed]
-        if any(e.action == "run" for e in plan):
-            print("computing the demo's " + ", ".join(e.stage for e in plan if e.action == "run"))
-        execute_plan_locally(FACE, config, plan, progress)
-    key = {e.stage: e.key for e in plan}
-    outputs = [
-        read_dataclass(FACE.stage(s).output, store.open(s, key[s]))  # type: ignore[arg-type]
-        for s in ("track", "align", "tetra", "materials")
-    ]
+        inputs = stage_inputs(FACE, config, "simulate", progress)
     params = config.section("simulate", SimulateStageParams)
-    args, _ = simulate_inputs(*outputs, params)
+    args, _ = simulate_inputs(**inputs, params=params)
     return args, params
 
 

@@ -8,6 +8,7 @@ from physanim.pipeline.executor import (
     execute_plan_locally,
     run_jobs,
     run_plan,
+    stage_inputs,
 )
 from physanim.pipeline.plan import PlanEntry, make_plan
 from physanim.pipeline.runner import StageFailed, StageResult, execute_stage, record_run
@@ -33,4 +34,5 @@ __all__ = [
     "record_run",
     "run_jobs",
     "run_plan",
+    "stage_inputs",
 ]

@@ -17,10 +17,10 @@ from functools import partial
 from typing import Any, Protocol
 
 from physanim.pipeline.context import ProgressFactory
-from physanim.pipeline.plan import PlanEntry
+from physanim.pipeline.plan import PlanEntry, make_plan
 from physanim.pipeline.runner import StageFailed, StageResult, execute_stage, record_run
 from physanim.pipeline.spec import Pipeline, PipelineConfig
-from physanim.store import StageStore
+from physanim.store import StageStore, read_dataclass
 
 #: (store path, stage, key): one distinct stage execution
 Ident = tuple[str, str, str]
@@ -204,3 +204,28 @@ def execute_plan_locally(
 ) -> list[StageResult]:
     """``run_plan`` in this process, without Prefect (tests, debugging, ``--local``)."""
     return run_plan(LocalExecutor(progress), pipeline, config, entries, on_result, info)
+
+
+def stage_inputs(
+    pipeline: Pipeline,
+    config: PipelineConfig,
+    stage: str,
+    progress: ProgressFactory | None = None,
+) -> dict[str, Any]:
+    """The typed outputs ``stage`` reads (upstream stage name -> output dataclass), after
+    preparing the dataset and computing, in this process, whichever upstream outputs the store
+    lacks (benchmarks and notebooks that run one stage's computation by hand)."""
+    if pipeline.prepare is not None:
+        pipeline.prepare(config, progress)
+    store = StageStore(config.dataset.store_path)
+    needed = pipeline.upstream(stage)[:-1]
+    plan = [e for e in make_plan(pipeline, config, store) if e.stage in needed]
+    execute_plan_locally(pipeline, config, plan, progress)
+    key = {e.stage: e.key for e in plan}
+    inputs = {}
+    for name in pipeline.stage(stage).upstream:
+        output = pipeline.stage(name).output
+        if output is None:
+            raise TypeError(f"stage {name} declares no output dataclass (StageSpec.typed)")
+        inputs[name] = read_dataclass(output, store.open(name, key[name]))
+    return inputs

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from pydantic import BaseModel
 
-from physanim.pipeline import Pipeline, StageSpec, execute_plan_locally, make_plan
+from physanim.pipeline import Pipeline, StageSpec, execute_plan_locally, make_plan, stage_inputs
 from physanim.store import StageStore, read_dataclass
 
 
@@ -65,3 +65,14 @@ class Scaled:
 
 
 def total(params: GainParams, gain: Ramp) -> Ramp: ...
+
+
+def test_stage_inputs_computes_what_is_missing_and_reads_it_typed(tmp_path):
+    """``stage_inputs``: the typed outputs a stage reads, its upstream computed on demand."""
+    config = TWO.config_model().model_validate({"dataset": {"dir": str(tmp_path)}})
+    inputs = stage_inputs(TWO, config, "gain")
+    assert list(inputs) == ["ramp"] and isinstance(inputs["ramp"], Ramp)
+    np.testing.assert_array_equal(inputs["ramp"].values, [0.0, 1.0, 2.0, 3.0, 4.0])
+    store = StageStore(config.dataset.store_path)
+    planned = {e.stage: e.action for e in make_plan(TWO, config, store)}
+    assert planned == {"ramp": "cached", "gain": "run"}  # only the upstream was computed
