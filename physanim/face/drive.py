@@ -22,6 +22,7 @@ from physanim.face.jaw import (
     estimate_jaw,
     jaw_displacements,
     mandible_weights,
+    neighbour_share,
 )
 from physanim.face.params import DriveParams, JawParams
 from physanim.fem.boundary import SpringDrive, landmark_drive, target_drive
@@ -158,7 +159,11 @@ def face_drive(
         bone_traj = np.zeros((n_t, len(bone_idx), 3))
     else:
         weight = mandible_weights(skin_anchor[bone_idx], mouth, blend_m)
-        weight[side[bone_idx] == UPPER] = 0.0  # the upper lip rides on the skull
+        upper = side[bone_idx] == UPPER
+        weight[upper] = 0.0  # the upper lip rides on the skull
+        # and its neighbours partly: without this, a tet at the end of the lip seam can join
+        # an upper-lip node (0) to nodes of weight ~1, a stress hot spot in that one tet
+        weight *= 1.0 - neighbour_share(tets, bone_idx[upper], len(nodes))[bone_idx]
         bone_traj = jaw_displacements(nodes[bone_idx], weight, jaw)
     free_skin = np.nonzero(skin & ~bone)[0]
 

@@ -143,6 +143,16 @@ def mandible_weights(points: NDArray, mouth: MouthLine, blend_m: float) -> NDArr
     return s * s * (3.0 - 2.0 * s)
 
 
+def neighbour_share(tets: NDArray, members: NDArray, n_nodes: int) -> NDArray:
+    """(n_nodes,) in [0, 1]: the mean, over each node's tets (M, 4), of the fraction of their
+    nodes that are ``members`` (node ids); 0 for nodes in no tet."""
+    is_member = np.zeros(n_nodes)
+    is_member[members] = 1.0
+    tet_share = np.repeat(is_member[tets].mean(axis=1), tets.shape[1])
+    total = np.bincount(tets.ravel(), weights=tet_share, minlength=n_nodes)
+    return total / np.maximum(np.bincount(tets.ravel(), minlength=n_nodes), 1)
+
+
 def jaw_displacements(points: NDArray, weights: NDArray, jaw: JawMotion) -> NDArray:
     """Displacements (T, N, 3) m of points (N, 3) m that follow the jaw with ``weights`` (N,)."""
     turn = jaw.rotations() - np.eye(3)  # (R - I) (x - p): exactly 0 where the angle is 0

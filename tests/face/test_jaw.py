@@ -12,6 +12,7 @@ from physanim.face.jaw import (
     estimate_jaw,
     jaw_displacements,
     mandible_weights,
+    neighbour_share,
 )
 from physanim.mesh.seam import straight_mouth_line
 
@@ -64,3 +65,11 @@ def test_mandible_weights_and_displacements() -> None:
     exact = _turned(pts, PIVOT, jaw.axis, np.array([0.2]))[0].T - pts
     np.testing.assert_allclose(d[1], w[:, None] * exact, atol=1e-15)
     assert d[1, -1, 1] < -5e-3  # the chin moves down when the jaw opens
+
+
+def test_neighbour_share_is_the_mean_member_fraction_of_a_nodes_tets():
+    """Two tets sharing face (1, 2, 3), node 0 a member: tet shares 1/4 and 0, so node 0 gets
+    1/4, the shared nodes (1/4 + 0) / 2 and node 4 (only in the second tet) 0."""
+    tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    share = neighbour_share(tets, np.array([0]), 6)
+    np.testing.assert_allclose(share, [0.25, 0.125, 0.125, 0.125, 0.0, 0.0])
