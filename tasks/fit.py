@@ -6,29 +6,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from physanim.face.fit import Embedding
+from physanim.face.fit import Embedding, FitResult
 from physanim.face.params import FitParams
 from physanim.pipeline import StageContext, StageSpec
 from tasks.track import TrackOutput
 
 
-@dataclass(frozen=True)
-class FitOutput:
-    """The face model fitted per frame (``physanim.face.fit.FitResult`` plus the model).
-
-    ``su`` (n_su,); ``au`` (T, n_au); ``pose`` (T, 6) rotvec rad + t m; ``motion`` (T, V, 3)
-    m, the motion mesh in the model frame; ``residual`` (T, K) m; ``rms`` (T,) m;
+@dataclass(frozen=True, kw_only=True)
+class FitOutput(FitResult):
+    """The face model fitted per frame: every field of ``physanim.face.fit.FitResult`` (``su``
+    (n_su,); ``au`` (T, n_au); ``pose`` (T, 6) rotvec rad + t m; ``motion`` (T, V, 3) m, the
+    motion mesh in the model frame; ``residual`` (T, K) m; ``rms`` (T,) m) plus the model:
     ``embedding`` of the K landmarks on the model; ``triangles`` (F, 3) of the model;
     ``au_names``, ``su_names``, ``vertex_names`` (V, named model vertices, else ""),
     ``landmark_names`` (K) the order of ``residual`` and ``embedding``.
     """
 
-    su: np.ndarray
-    au: np.ndarray
-    pose: np.ndarray
-    motion: np.ndarray
-    residual: np.ndarray
-    rms: np.ndarray
     embedding: Embedding
     triangles: np.ndarray
     au_names: list[str]
@@ -52,9 +45,10 @@ def compute(params: FitParams, track: TrackOutput, ctx: StageContext[FitParams])
         max_rms_mm=round(float(result.rms.max()) * 1e3, 3),
     )
     return FitOutput(
-        result.su, result.au, result.pose, result.motion, result.residual, result.rms,
-        embedding, model.triangles, list(model.au_names), list(model.su_names),
-        list(model.vertex_names), list(names),
+        **vars(result),  # the FitResult fields
+        embedding=embedding, triangles=model.triangles, au_names=list(model.au_names),
+        su_names=list(model.su_names), vertex_names=list(model.vertex_names),
+        landmark_names=list(names),
     )  # fmt: skip
 
 

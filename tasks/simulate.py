@@ -26,6 +26,7 @@ from pydantic import ConfigDict, Field
 from physanim.face.jaw import JawMotion
 from physanim.face.params import DriveParams, JawParams
 from physanim.fem.params import SimulateParams
+from physanim.fem.simulate import SimResult, simulate
 from physanim.pipeline import StageContext, StageSpec
 from tasks.align import AlignOutput
 from tasks.materials import MaterialsOutput
@@ -41,37 +42,16 @@ class SimulateStageParams(SimulateParams):
     jaw: JawParams = Field(default_factory=JawParams, description="mandible motion")
 
 
-@dataclass(frozen=True)
-class SimulateOutput:
-    """The tissue's motion at the capture frame rate (T frames, n nodes, m tets).
-
-    ``displacements`` (T, n, 3) float32 m; ``times`` (T,) s;
-    ``kinetic``, ``strain``, ``dissipated`` (T,) J; ``max_von_mises`` and ``p99_von_mises``
-    (T,) Pa; ``inverted_count`` (T,), ``inverted_tets`` (K,); ``dt`` s smallest substep,
-    ``n_substeps``, ``frame_substeps`` (T,), ``check_steps``, ``frames_over_tolerance``,
-    ``solver_threads`` (T,), ``corot_iterations`` (T,) or None, ``timings`` s (see
-    ``physanim.fem.simulate.SimResult``); the boundary conditions: ``driven_nodes`` (D,)
-    prescribed, ``bone_nodes`` (B,), ``mandible_weight`` (n,), ``spring_nodes`` (S,) with
-    ``spring_stiffness`` (S,) N/m, ``driving_landmarks`` and the ``jaw`` (None: disabled).
+@dataclass(frozen=True, kw_only=True)
+class SimulateOutput(SimResult):
+    """The tissue's motion at the capture frame rate (T frames, n nodes, m tets): every field
+    of :class:`~physanim.fem.simulate.SimResult` (displacements (T, n, 3) float32 m, energies
+    J, von Mises max and 99th percentile Pa, inverted tets, steps, timings s) plus the boundary
+    conditions: ``driven_nodes`` (D,) prescribed, ``bone_nodes`` (B,), ``mandible_weight`` (B,),
+    ``spring_nodes`` (S,) with ``spring_stiffness`` (S,) N/m, ``driving_landmarks`` and the
+    ``jaw`` (None: disabled).
     """
 
-    displacements: np.ndarray
-    times: np.ndarray
-    kinetic: np.ndarray
-    strain: np.ndarray
-    dissipated: np.ndarray
-    max_von_mises: np.ndarray
-    p99_von_mises: np.ndarray
-    inverted_count: np.ndarray
-    inverted_tets: np.ndarray
-    dt: float
-    n_substeps: int
-    timings: dict[str, float]
-    corot_iterations: np.ndarray | None
-    frame_substeps: np.ndarray | None
-    solver_threads: np.ndarray | None
-    check_steps: int
-    frames_over_tolerance: int
     driven_nodes: np.ndarray
     bone_nodes: np.ndarray
     mandible_weight: np.ndarray
@@ -79,15 +59,6 @@ class SimulateOutput:
     spring_stiffness: np.ndarray
     driving_landmarks: list[str]
     jaw: JawMotion | None = None
-
-
-#: the fields of SimulateOutput that come from ``physanim.fem.simulate``'s result
-RESULT_FIELDS = (
-    "displacements", "times", "kinetic", "strain", "dissipated", "max_von_mises",
-    "p99_von_mises", "inverted_count", "inverted_tets", "dt", "n_substeps", "timings",
-    "corot_iterations", "frame_substeps", "solver_threads", "check_steps",
-    "frames_over_tolerance",
-)  # fmt: skip
 
 
 def simulate_inputs(
@@ -134,7 +105,6 @@ def compute(
     """displacements (T,n,3) float32 m, energies (T,) J, von Mises max and 99th percentile
     (T,) Pa, the jaw's angle (T,) rad / pivot / axis, the driven and spring nodes."""
     from physanim.face.performance import performance_summary
-    from physanim.fem.simulate import simulate
 
     args, drive = simulate_inputs(track, align, tetra, materials, params)
     result = simulate(**args, params=params, progress=ctx.progress("simulate"))
@@ -143,7 +113,7 @@ def compute(
     )
     springs = drive.springs
     return SimulateOutput(
-        **{f: getattr(result, f) for f in RESULT_FIELDS},
+        **vars(result),  # the SimResult fields
         driven_nodes=drive.prescribed,
         bone_nodes=drive.bone,
         mandible_weight=drive.mandible_weight,

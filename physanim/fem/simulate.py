@@ -27,7 +27,7 @@ from physanim.fem.params import SimulateParams
 from physanim.fem.stepping import FrameStepper, IntegratorCache, initial_state, substep_levels
 
 
-@dataclass
+@dataclass(frozen=True)
 class SimResult:
     """Simulation output at the capture frame rate (T frames, N nodes, M tets).
 
