@@ -13,6 +13,10 @@ Version 5: bone-side nodes next to the upper lip follow the mandible less, by th
 upper-lip nodes in their tets (``physanim.face.jaw.neighbour_share``), so no tet at the end of
 the lip seam joins weights 0 and ~1 (peak / 99th-percentile stress on the demo 5.29 -> 4.62,
 fidelity and philtrum peaks unchanged to 1e-3).
+
+Version 6: adaptive steps by Zienkiewicz-Xie's error estimate with the drive's path (one step
+per frame on the demo instead of two plus a check, 0.5 % of peak against dt = 0.5 ms), and the
+jaw's least squares with a sparse Jacobian (angles within 2e-4 degrees of before).
 """
 
 from __future__ import annotations
@@ -127,7 +131,7 @@ def compute(
 SPEC = StageSpec.typed(
     "simulate",
     compute,
-    version="5",
+    version="6",
     doc="viscoelastic FEM (Newmark); skull fixed, mandible turned by the estimated jaw, skin "
     "pulled by the tracked landmarks",
 )

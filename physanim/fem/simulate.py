@@ -125,7 +125,9 @@ def simulate(
     integrators = IntegratorCache(integ, levels[0], frame_dt, params.factor_cache)
     t_fac = time.perf_counter() - t0
     force = bc.spring_force(integ.free)
-    stepper = FrameStepper(integrators, levels, bc, force, params.error_tol_mm * 1e-3)
+    stepper = FrameStepper(
+        integrators, levels, bc, force, params.error_tol_mm * 1e-3, params.error_estimate
+    )
 
     state = initial_state(integ, stiffness, bc, force, params.solver)
 

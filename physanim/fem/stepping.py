@@ -1,10 +1,17 @@
-"""Newmark substeps between capture frames (fixed, or adaptive by step doubling) and the
-state they start from.
+"""Newmark substeps between capture frames (fixed, or adaptive) and the state they start from.
 
-Adaptive frames are computed from the same state in n and 2n substeps (n = 1, 2, 4, ...); the
-finer result is kept and its error estimated as |d_2n - d_n| / (r^2 - 1) (Richardson, second
-order); a frame over the tolerance is redone with twice the substeps, a frame far below it
-lets the next one try half (see ``SimulateParams.stepping``).
+Adaptive frames take n substeps (n = 1, 2, 4, ...) and estimate the frame's local error in
+displacement, either
+
+- 'acceleration' (default): Zienkiewicz & Xie's a posteriori estimate for Newmark,
+  e = -(beta - 1/6) h^2 (a_{k+1} - a_k) = -h^2/12 Delta a per substep, summed over the frame
+  (the accelerations' change over it), taken through the step's matrix and with the driven
+  nodes' path between the substeps (``Newmark.local_error``): one more solve per frame; or
+- 'doubling': the frame is computed from the same state in n and 2n substeps, the finer kept
+  and its error estimated as |d_2n - d_n| / (r^2 - 1) (Richardson, second order).
+
+A frame over the tolerance is redone with twice the substeps; a frame far below it lets the
+next one try half (the frame's error scales as h^2: n substeps of local error ~ h^3).
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ class SimulationDiverged(RuntimeError):
 
 def substep_levels(frame_dt: float, params: SimulateParams, adaptive_ok: bool) -> list[int]:
     """Substeps per frame to choose from: [n_max] when fixed, else 1, 2, 4, ... and n_max
-    (n_max = ceil(frame_dt / params.dt)); adaptive frames pair level i and i + 1."""
+    (n_max = ceil(frame_dt / params.dt)); 'doubling' frames pair level i and i + 1."""
     n_max = max(1, math.ceil(frame_dt / params.dt - 1e-9))
     if not (params.stepping == "adaptive" and adaptive_ok and n_max > 1):
         return [n_max]
@@ -82,9 +89,11 @@ class IntegratorCache:
 
 class FrameStepper:
     """Advances a :class:`State` from frame k - 1 to frame k under boundary conditions ``bc``
-    and optional spring ``force``. Counts per run: ``substeps`` (T,) substeps that led to
-    each frame, ``check_steps`` (steps computed and discarded), ``over`` (frames whose error
-    stayed above the tolerance at the smallest step allowed)."""
+    and optional spring ``force``. ``estimate``: 'acceleration' or 'doubling' (module
+    docstring). Counts per run: ``substeps`` (T,) substeps that led to each frame,
+    ``check_steps`` (steps computed and discarded), ``over`` (frames whose error stayed above
+    the tolerance at the smallest step allowed), ``errors`` (T,) estimated error of each
+    frame, m."""
 
     def __init__(
         self,
@@ -93,11 +102,13 @@ class FrameStepper:
         bc: BoundaryConditions,
         force: SpringForce | None,
         error_tol_m: float,
+        estimate: str = "acceleration",
     ) -> None:
         self.integrators, self.levels, self.bc, self.force = integrators, levels, bc, force
-        self.tol = error_tol_m
+        self.tol, self.estimate = error_tol_m, estimate
         self.level = 0
         self.substeps = np.zeros(bc.n_frames, dtype=np.int64)
+        self.errors = np.zeros(bc.n_frames)
         self.check_steps = 0
         self.over = 0
 
@@ -109,15 +120,17 @@ class FrameStepper:
         """The integrator of the current level's substeps."""
         return self.integrators.get(self.levels[self.level])
 
-    def advance(self, state: State, k: int, n_sub: int, heat_too: bool = True) -> float:
+    def advance(
+        self, state: State, k: int, n_sub: int, heat_too: bool = True
+    ) -> tuple[float, np.ndarray]:
         """Steps from frame k - 1 to frame k in n_sub substeps; returns the dissipation, J
-        (0 unless ``heat_too``)."""
+        (0 unless ``heat_too``), and the free DOFs' accelerations before them (n_free,)."""
         frame_dt = self.bc.frame_dt
         integ, h = self.integrators.get(n_sub), frame_dt / n_sub
         times = (k - 1) * frame_dt + h * np.arange(1, n_sub + 1)
         dd, vv, aa = self.bc.prescribed(times)
         ff = None if self.force is None else self.force.free(times)
-        heat = 0.0
+        heat, a_start = 0.0, state.a[integ.free]
         for j in range(n_sub):
             d_old = state.d.copy()
             integ.step(state, dd[j], vv[j], aa[j], None if ff is None else ff[j])
@@ -131,32 +144,51 @@ class FrameStepper:
                 )
             if heat_too:
                 heat += integ.dissipation(state.d - d_old)
-        return heat
+        return heat, a_start
 
     def frame(self, state: State, k: int) -> float:
         """Advance ``state`` to frame k; returns the viscous dissipation of the step, J."""
         if not self.adaptive:
             self.substeps[k] = self.levels[0]
-            return self.advance(state, k, self.levels[0])
-        levels = self.levels
+            return self.advance(state, k, self.levels[0])[0]
         saved = (state.d.copy(), state.v.copy(), state.a.copy())
+        run = self._doubled if self.estimate == "doubling" else self._estimated
+        last = len(self.levels) - (2 if self.estimate == "doubling" else 1)
         while True:
-            coarse, fine = levels[self.level], levels[self.level + 1]
-            self.advance(state, k, coarse, heat_too=False)
-            d_coarse = state.d.copy()
-            state.d[:], state.v[:], state.a[:] = saved
-            heat = self.advance(state, k, fine)
-            ratio = fine / coarse
-            error = float(np.abs(state.d - d_coarse).max()) / (ratio**2 - 1)
-            if error <= self.tol or self.level + 2 == len(levels):
+            heat, error, n_sub, discarded = run(state, k, saved)
+            if error <= self.tol or self.level == last:
                 self.over += error > self.tol
                 break
             state.d[:], state.v[:], state.a[:] = saved
-            self.check_steps += coarse + fine
+            self.check_steps += discarded + n_sub
             self.level += 1
-        # local error ~ dt^3: next frame a coarser pair when it would stay in tol / 2
-        if self.level > 0 and error * (coarse / levels[self.level - 1]) ** 3 < self.tol / 2:
-            self.level -= 1
-        self.substeps[k] = fine
-        self.check_steps += coarse
+        # the frame's error ~ h^2: next frame one level coarser when it would stay in tol / 2
+        if self.level > 0:
+            coarser = n_sub * self.levels[self.level - 1] // self.levels[self.level]
+            if error * (n_sub / coarser) ** 2 < self.tol / 2:
+                self.level -= 1
+        self.substeps[k], self.errors[k] = n_sub, error
+        self.check_steps += discarded
         return heat
+
+    def _estimated(self, state: State, k: int, saved) -> tuple[float, float, int, int]:
+        """The frame in the current level's substeps with the Zienkiewicz-Xie estimate of
+        its substeps' summed local errors (one more solve): (heat J, error m, substeps,
+        steps discarded)."""
+        n_sub = self.levels[self.level]
+        heat, a_start = self.advance(state, k, n_sub)
+        integ, frame_dt = self.integrators.get(n_sub), self.bc.frame_dt
+        defect = self.bc.drive_defect((k - 1) * frame_dt, frame_dt / n_sub, n_sub)
+        error = integ.local_error(state.a[integ.free] - a_start, defect)
+        return heat, float(np.abs(error).max()), n_sub, 0
+
+    def _doubled(self, state: State, k: int, saved) -> tuple[float, float, int, int]:
+        """The frame in n and 2n substeps from the same state, the finer kept, with its
+        Richardson estimate: (heat J, error m, substeps kept, steps discarded)."""
+        coarse, fine = self.levels[self.level], self.levels[self.level + 1]
+        self.advance(state, k, coarse, heat_too=False)
+        d_coarse = state.d.copy()
+        state.d[:], state.v[:], state.a[:] = saved
+        heat = self.advance(state, k, fine)[0]
+        error = float(np.abs(state.d - d_coarse).max()) / ((fine / coarse) ** 2 - 1)
+        return heat, error, fine, coarse
