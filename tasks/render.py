@@ -4,10 +4,14 @@ Per frame: the captured colour frame with the tracked landmarks, the CANDIDE-sty
 kinematic (bound) scan and the FEM skin coloured by displacement, in one panel
 (``physanim.render.face_panel``); PNG frames, an MP4 at the capture frame rate and matplotlib
 plots (``physanim.render.plots.plot_face_run``), all in this output's files/.
+
+Version 5: panels kept as PNG only at the evaluated peak frames by default
+(``render.png_frames``), the plots drawn while the tiles render.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 from physanim.evaluate.face import FaceEvaluation
@@ -64,11 +68,16 @@ def compute(
         displacements=simulate.displacements,
     )  # fmt: skip
     cache = ctx.dataset.run_dir / "cache" / "render-tiles"
-    done = render_face_panel(footage, params, ctx.files_dir, cache, ctx.progress)
     energies = dict(
         kinetic=simulate.kinetic, strain=simulate.strain, dissipated=simulate.dissipated
     )
-    plot_face_run(simulate.times, energies, simulate.jaw, evaluate, ctx.files_dir)
+    peaks = (evaluate.peak_frames or {}).values()
+    with ThreadPoolExecutor(1) as pool:  # the plots draw while the panel's tiles render
+        plots = pool.submit(
+            plot_face_run, simulate.times, energies, simulate.jaw, evaluate, ctx.files_dir
+        )
+        done = render_face_panel(footage, params, ctx.files_dir, cache, ctx.progress, peaks)
+        plots.result()
     n = len(done.frames)
     ctx.summary.update(
         frames=n,
@@ -82,7 +91,7 @@ def compute(
 SPEC = StageSpec.typed(
     "render",
     compute,
-    version="4",
+    version="5",
     doc="panel video (capture | fit | kinematic | FEM), symmetry / mouth / energy plots",
     files=FILES,
 )

@@ -9,14 +9,15 @@ capture frame rate (divided by the frame stride).
 from __future__ import annotations
 
 import time
+from collections.abc import Collection
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from physanim.mesh.seam import MouthLine
 from physanim.pipeline import ProgressFactory
@@ -29,11 +30,21 @@ class PanelParams(BaseModel):
     tile_width_px: int = Field(480, ge=64, le=4096, description="width of each panel tile, px")
     tile_height_px: int = Field(640, ge=64, le=4096, description="height of each tile, px")
     every_frames: int = Field(1, ge=1, le=1000, description="render every n-th frame")
-    png_frames: bool = Field(True, description="also keep each panel as a PNG")
+    png_frames: Literal["peaks", "all", "none"] = Field(
+        "peaks",
+        description="panels also kept as PNG (frames/<frame>.png): 'peaks' = the evaluated "
+        "expressions' peak frames (the report shows them; about 70 ms per PNG), 'all', or "
+        "'none' (true / false read as 'all' / 'none')",
+    )
     displacement_max_mm: float = Field(
         0.0, ge=0.0, le=100.0, description="colour-bar top, mm (0: the run's maximum)"
     )
     turntable: bool = Field(False, description="turn the 3D tiles once around over the video")
+
+    @field_validator("png_frames", mode="before")
+    @classmethod
+    def _from_bool(cls, value: Any) -> Any:
+        return {True: "all", False: "none"}.get(value, value) if isinstance(value, bool) else value
 
 
 @dataclass(frozen=True)
@@ -81,20 +92,27 @@ def render_face_panel(
     folder: Path,
     cache_dir: Path,
     progress: ProgressFactory,
+    peaks: Collection[int] = (),
 ) -> FacePanel:
     """Render every ``params.every_frames``-th frame of ``footage`` as a panel into
-    ``folder``: ``panel.mp4`` and, with ``params.png_frames``, ``frames/<frame>.png``.
+    ``folder``: ``panel.mp4`` and, as ``params.png_frames`` asks, ``frames/<frame>.png``
+    (``peaks``: the frames 'peaks' keeps).
 
-    The fit and kinematic tiles, which no material edit changes, come from the tile cache
-    in ``cache_dir`` when their inputs did not change."""
+    The 3D tiles render in worker processes while this one crops the capture; the fit and
+    kinematic tiles, which no material edit changes, come from the tile cache in
+    ``cache_dir`` when their inputs did not change."""
     frames = np.arange(0, footage.displacements.shape[0], params.every_frames)
-    t0 = time.perf_counter()
-    tiles = model_tiles(footage, frames, params, cache_dir, progress)
-    render_s = time.perf_counter() - t0
     size = (params.tile_width_px, params.tile_height_px)
-    panels = capture_panels(footage, frames, tiles, size)
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(1) as pool:
+        tiles = pool.submit(model_tiles, footage, frames, params, cache_dir, progress)
+        captured = capture_tiles(footage, frames, size)
+        rendered = tiles.result()
+    render_s = time.perf_counter() - t0
+    panels = compose_panels(footage, frames, captured, rendered)
+    keep = {"all": frames, "none": (), "peaks": peaks}[params.png_frames]
     fps = footage.fps / params.every_frames
-    video, codec = write_panels(panels, frames, folder, fps, params.png_frames)
+    video, codec = write_panels(panels, frames, folder, fps, set(keep))
     return FacePanel(frames, video, codec, render_s)
 
 
@@ -160,26 +178,50 @@ def capture_panels(
     """One panel per frame of ``frames`` (R,): the capture cropped to the face (the
     landmarks' box + 60 %, with the aspect of a tile of ``size`` (W, H) px) with the tracked
     landmarks, then the ``tiles`` (title -> (R, H, W, 3) uint8) under their titles."""
+    return compose_panels(footage, frames, capture_tiles(footage, frames, size), tiles)
+
+
+def capture_tiles(footage: FaceFootage, frames: NDArray, size: tuple[int, int]) -> list[NDArray]:
+    """The capture at ``frames`` (R,) cropped to the face (the landmarks' box + 60 %, with the
+    aspect of a tile of ``size`` (W, H) px) with the tracked landmarks drawn: R images."""
     from physanim.render.crop import face_crop
-    from physanim.render.panel import draw_landmarks, panel
+    from physanim.render.panel import draw_landmarks
 
     colour = _frames(footage.colour, frames)
     uv, conf = footage.uv[frames], footage.confidence[frames]
     box = face_crop(uv, colour.shape[1:3], size)
     offset = np.array([box[2], box[0]])
-    panels = []
-    for i, t in enumerate(frames):
-        crop = np.ascontiguousarray(colour[i, box[0] : box[1], box[2] : box[3]])
-        captured = draw_landmarks(crop, uv[i] - offset, conf[i], radius=2)
-        images = [captured, *(v[i] for v in tiles.values())]
-        panels.append(panel(images, [f"capture t={t / footage.fps:.2f} s", *tiles]))
-    return panels
+    return [
+        draw_landmarks(
+            np.ascontiguousarray(colour[i, box[0] : box[1], box[2] : box[3]]),
+            uv[i] - offset,
+            conf[i],
+            radius=2,
+        )  # fmt: skip
+        for i in range(len(frames))
+    ]
+
+
+def compose_panels(
+    footage: FaceFootage, frames: NDArray, captured: list[NDArray], tiles: dict[str, NDArray]
+) -> list[NDArray]:
+    """Per frame of ``frames`` (R,): its ``captured`` image then the ``tiles`` (title ->
+    (R, H, W, 3) uint8) side by side under their titles."""
+    from physanim.render.panel import panel
+
+    return [
+        panel(
+            [captured[i], *(v[i] for v in tiles.values())],
+            [f"capture t={t / footage.fps:.2f} s", *tiles],
+        )
+        for i, t in enumerate(frames)
+    ]
 
 
 def write_panels(
-    panels: list[NDArray], frames: NDArray, folder: Path, fps: float, png_frames: bool
+    panels: list[NDArray], frames: NDArray, folder: Path, fps: float, png: Collection[int]
 ) -> tuple[Path, str]:
-    """``folder/panel.mp4`` at ``fps`` frames/s and, with ``png_frames``, each panel as
+    """``folder/panel.mp4`` at ``fps`` frames/s and the panels of the frames in ``png`` as
     ``folder/frames/<frame>.png`` (written while FFmpeg encodes); (video path, codec)."""
     import cv2
 
@@ -189,14 +231,14 @@ def write_panels(
 
     def write_pngs() -> None:
         for t, frame in zip(frames, panels, strict=True):  # fast zlib level: 3x quicker
-            path = str(folder / "frames" / f"{t:04d}.png")
-            cv2.imwrite(path, frame[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 1])
+            if t in png:
+                path = str(folder / "frames" / f"{t:04d}.png")
+                cv2.imwrite(path, frame[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 1])
 
     with ThreadPoolExecutor(1) as pool:
-        pngs = pool.submit(write_pngs) if png_frames else None
+        pngs = pool.submit(write_pngs)
         video, codec = write_mp4(panels, folder / "panel.mp4", fps)
-        if pngs is not None:
-            pngs.result()
+        pngs.result()
     return video, codec
 
 

@@ -123,7 +123,7 @@ def test_capture_panels_crop_the_face_and_write_every_frame(tmp_path):
     first = panels[0][0]
     assert first.shape == (TITLE_HEIGHT + 160, 120 + 120, 3)
     assert (first[TITLE_HEIGHT + 80, 60] == 255).all() and (first[TITLE_HEIGHT + 80, 5] == 0).all()
-    video, _ = write_panels(panels[0], frames, tmp_path / "out", 5.0, png_frames=True)
+    video, _ = write_panels(panels[0], frames, tmp_path / "out", 5.0, png={0, 2})
     assert video.exists() and sorted(p.name for p in (tmp_path / "out" / "frames").iterdir()) == [
         "0000.png",
         "0002.png",
