@@ -16,13 +16,14 @@ material moves differently from the capture.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from physanim.fem.geometry import node_dofs
-from physanim.fem.interp import catmull_rom
+from physanim.fem.interp import catmull_rom, tangents
 from physanim.mesh.seam import NONE
 
 
@@ -89,9 +90,16 @@ class SpringForce:
     frame_dt: float
     n_free: int
 
+    @cached_property
+    def _forces(self) -> tuple[NDArray, NDArray]:
+        """Forces k_i u_i (T, 3S) N at the frames and their Catmull-Rom tangents, N/s."""
+        targets = self.springs.targets.reshape(len(self.springs.targets), -1)
+        forces = targets * np.repeat(self.springs.stiffness, 3)
+        return forces, tangents(forces, self.frame_dt)
+
     def _at(self, times: NDArray) -> NDArray:
-        t = self.springs.targets.reshape(len(self.springs.targets), -1)
-        return catmull_rom(t, self.frame_dt, times)[0] * np.repeat(self.springs.stiffness, 3)
+        forces, tang = self._forces
+        return catmull_rom(forces, self.frame_dt, times, tang)[0]
 
     def free(self, times: NDArray) -> NDArray:
         """(len(times), n_free) forces on the free DOFs, N."""
@@ -163,9 +171,13 @@ class BoundaryConditions:
         """(n_c,) prescribed DOFs: the driven nodes' then the fixed nodes'."""
         return np.concatenate([node_dofs(self.driven_idx), node_dofs(self.fixed_idx)])
 
+    @cached_property
+    def _tangents(self) -> NDArray:
+        return tangents(self.values, self.frame_dt)
+
     def prescribed(self, times: NDArray) -> tuple[NDArray, NDArray, NDArray]:
         """Displacement, velocity, acceleration (len(times), n_c) of the prescribed DOFs."""
-        d, v, a = catmull_rom(self.values, self.frame_dt, times)
+        d, v, a = catmull_rom(self.values, self.frame_dt, times, self._tangents)
         pad = np.zeros((len(times), 3 * self.fixed_idx.size))
         return tuple(np.hstack([x, pad]) for x in (d, v, a))
 

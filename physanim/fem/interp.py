@@ -5,24 +5,35 @@ from __future__ import annotations
 import numpy as np
 
 
+def tangents(values: np.ndarray, frame_dt: float) -> np.ndarray:
+    """Catmull-Rom tangents (T, K) of ``values`` (T >= 2, K) sampled every ``frame_dt`` s: central
+    differences, one-sided at the ends, in units of ``values`` per s."""
+    values = np.asarray(values, dtype=np.float64)
+    h = float(frame_dt)
+    tang = np.empty_like(values)
+    tang[1:-1] = (values[2:] - values[:-2]) / (2 * h)
+    tang[0] = (values[1] - values[0]) / h
+    tang[-1] = (values[-1] - values[-2]) / h
+    return tang
+
+
 def catmull_rom(
-    values: np.ndarray, frame_dt: float, times: np.ndarray
+    values: np.ndarray, frame_dt: float, times: np.ndarray, tang: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Position, velocity and acceleration of a uniform Catmull-Rom spline at ``times``.
 
     values (T, K) sampled at t_k = k frame_dt (s); times (S,) in [0, (T-1) frame_dt].
     Tangents are central differences, one-sided at the ends. Returns three (S, K) arrays in
-    the units of ``values`` per s^0, s^1 and s^2.
+    the units of ``values`` per s^0, s^1 and s^2. ``tang``: the :func:`tangents` of
+    ``values``, when already computed.
     """
     values = np.asarray(values, dtype=np.float64)
     n = len(values)
     if n < 2:
         raise ValueError(f"trajectory needs at least 2 frames, got {n}")
     h = float(frame_dt)
-    tang = np.empty_like(values)
-    tang[1:-1] = (values[2:] - values[:-2]) / (2 * h)
-    tang[0] = (values[1] - values[0]) / h
-    tang[-1] = (values[-1] - values[-2]) / h
+    if tang is None:
+        tang = tangents(values, h)
     u = np.clip(np.asarray(times, dtype=np.float64) / h, 0.0, n - 1)
     k = np.minimum(np.floor(u).astype(np.int64), n - 2)
     s = (u - k)[:, None]
