@@ -6,6 +6,8 @@ DOF layout: 3 DOFs per node, interleaved (x0, y0, z0, x1, ...). Voigt strain ord
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -58,12 +60,49 @@ def element_blocks(B: np.ndarray, volumes: np.ndarray, D: np.ndarray) -> np.ndar
 
 
 def assemble(blocks: np.ndarray, tets: np.ndarray, n_nodes: int) -> sp.csr_matrix:
-    """Sum element blocks (M, 12, 12) into a sparse (3N, 3N) CSR matrix."""
-    dofs = element_dofs(tets)
-    rows = np.repeat(dofs, 12, axis=1).ravel()
-    cols = np.tile(dofs, (1, 12)).ravel()
+    """Sum element blocks (M, 12, 12) into a sparse (3N, 3N) CSR matrix (sorted indices)."""
+    indptr, indices, slots = _block_pattern(np.ascontiguousarray(tets), n_nodes)
+    data = np.bincount(slots, weights=blocks.ravel(), minlength=len(indices))
     n = 3 * n_nodes
-    return sp.coo_matrix((blocks.ravel(), (rows, cols)), shape=(n, n)).tocsr()
+    return sp.csr_matrix((data, indices, indptr), shape=(n, n))
+
+
+# K, M and C of a mesh share one pattern: it is found once per mesh, from the node pairs
+# (16 per tet, not the 144 DOF pairs whose sort took most of each assembly), and each matrix
+# is then a bincount into its slots
+_PATTERNS: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def _block_pattern(tets: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR indptr (3N + 1,) and indices of the element blocks' union pattern and each block
+    entry's slot in it (M * 144,), cached for the last meshes seen.
+
+    DOF row 3 i + a holds, for each node j coupled to i (sorted), columns 3 j + (0, 1, 2):
+    node pair slot p of row i puts entry (a, b) at 9 nptr[i] + 3 a deg[i] + 3 p + b."""
+    key = (n_nodes, tets.shape, str(tets.dtype), hashlib.blake2b(tets.tobytes()).digest())
+    if key not in _PATTERNS:
+        t = tets.astype(np.int64)
+        pairs, slot = np.unique(
+            (t[:, :, None] * n_nodes + t[:, None, :]).ravel(), return_inverse=True
+        )
+        nptr = np.searchsorted(pairs, np.arange(n_nodes + 1) * n_nodes)
+        deg = np.diff(nptr)
+        m = len(t)
+        row = t.reshape(m, 4, 1, 1, 1)  # axes (tet, row node, row DOF a, column node, DOF b)
+        a = np.arange(3).reshape(1, 1, 3, 1, 1)
+        p = slot.reshape(m, 4, 1, 4, 1) - nptr[row]
+        slots = (9 * nptr[row] + 3 * a * deg[row] + 3 * p + np.arange(3)).reshape(-1)
+        indptr = np.r_[
+            (9 * nptr[:-1, None] + 3 * np.arange(3) * deg[:, None]).ravel(), 9 * nptr[-1]
+        ]
+        indices = np.empty(9 * len(pairs), np.int64)
+        indices[slots] = np.broadcast_to(
+            3 * t.reshape(m, 1, 1, 4, 1) + np.arange(3), (m, 4, 3, 4, 3)
+        ).reshape(-1)
+        if len(_PATTERNS) >= 2:
+            _PATTERNS.pop(next(iter(_PATTERNS)))
+        _PATTERNS[key] = (indptr, indices, slots)
+    return _PATTERNS[key]
 
 
 def nodal_volumes(tets: np.ndarray, volumes: np.ndarray, n_nodes: int) -> np.ndarray:
