@@ -18,21 +18,7 @@ from physanim.capture.params import DemoParams
 from physanim.pipeline import Pipeline, PipelineConfig, PlanEntry
 from physanim.store import StageStore
 from physanim.store.stage_store import LATEST
-from tasks import (
-    align,
-    arm_render,
-    evaluate,
-    fit,
-    ingest,
-    keyframe_render,
-    keyframes,
-    materials,
-    muscles,
-    render,
-    simulate,
-    tetra,
-    track,
-)
+from tasks import align, evaluate, fit, ingest, materials, render, simulate, tetra, track
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -43,8 +29,6 @@ def face_report(store: StageStore, entries: list[PlanEntry], config: PipelineCon
     Rebuilt when a stage ran or the latest run changed since it was written, so a warm run
     that changes nothing costs nothing here.
     """
-    from physanim.render.run_report import write_run_report
-
     dataset = config.dataset
     out = dataset.run_dir / "report"
     index, pointer = out / "index.html", store.root / LATEST
@@ -53,6 +37,8 @@ def face_report(store: StageStore, entries: list[PlanEntry], config: PipelineCon
     )
     if fresh and not any(e.action == "run" for e in entries):
         return index
+    from physanim.render.run_report import write_run_report  # matplotlib: only when written
+
     return write_run_report(FACE, store, entries, out, f"physanim: {dataset.name}")
 
 
@@ -75,19 +61,38 @@ FACE = Pipeline(
     report=face_report,
 )
 
-ARM = Pipeline(
-    name="arm",
-    stages=(muscles.SPEC, arm_render.SPEC),
-    default_config=CONFIGS / "arm" / "default.yaml",
-)
 
-KEYFRAME = Pipeline(
-    name="keyframe",
-    stages=(keyframes.SPEC, keyframe_render.SPEC),
-    default_config=CONFIGS / "keyframe.yaml",
-)
+def _arm() -> Pipeline:
+    from tasks import arm_render, muscles
 
-PIPELINES: dict[str, Pipeline] = {p.name: p for p in (FACE, ARM, KEYFRAME)}
+    return Pipeline(
+        name="arm",
+        stages=(muscles.SPEC, arm_render.SPEC),
+        default_config=CONFIGS / "arm" / "default.yaml",
+    )
+
+
+def _keyframe() -> Pipeline:
+    from tasks import keyframe_render, keyframes
+
+    return Pipeline(
+        name="keyframe",
+        stages=(keyframes.SPEC, keyframe_render.SPEC),
+        default_config=CONFIGS / "keyframe.yaml",
+    )
+
+
+# the arm and keyframe DAGs import the rigid-body and muscle code (numba): built on first use,
+# so a face run does not import them
+_BUILDERS = {"face": lambda: FACE, "arm": _arm, "keyframe": _keyframe}
+_BUILT: dict[str, Pipeline] = {"face": FACE}
+
+
+def __getattr__(name: str) -> Pipeline:
+    """``ARM`` and ``KEYFRAME``, built on first access."""
+    if name in ("ARM", "KEYFRAME"):
+        return get_pipeline(name.lower())
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def get_pipeline(name: str) -> Pipeline:
@@ -108,6 +113,8 @@ def get_pipeline(name: str) -> Pipeline:
                 f"-p {name}: {attr!r} is a {type(found).__name__}, not a physanim.pipeline.Pipeline"
             )
         return found
-    if name not in PIPELINES:
-        raise ValueError(f"unknown pipeline {name!r}; known: {', '.join(PIPELINES)}")
-    return PIPELINES[name]
+    if name not in _BUILDERS:
+        raise ValueError(f"unknown pipeline {name!r}; known: {', '.join(_BUILDERS)}")
+    if name not in _BUILT:
+        _BUILT[name] = _BUILDERS[name]()
+    return _BUILT[name]

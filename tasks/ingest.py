@@ -99,13 +99,14 @@ def ensure_demo(config: PipelineConfig, progress: ProgressFactory | None = None)
 
     Returns the generated directory, or None when nothing had to be done.
     """
-    from physanim.capture.demo import generate_demo
     from physanim.capture.ingest import has_recording
-    from physanim.capture.params import DemoParams
 
     dataset = config.dataset
     if dataset.name != "demo" or has_recording(dataset.path):
         return None
+    from physanim.capture.demo import generate_demo  # open3d: only when generating
+    from physanim.capture.params import DemoParams
+
     report = progress("demo dataset") if progress else None
     demo = config.section("demo", DemoParams)
     return generate_demo(dataset.path, params=demo, progress=report)
