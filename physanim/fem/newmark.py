@@ -224,8 +224,17 @@ def _common_pattern(*mats: sp.spmatrix) -> tuple[sp.csc_matrix, list[np.ndarray]
     it, so that linear combinations of them are sums of value arrays."""
     pattern = sp.csc_matrix(sum(abs(sp.csc_matrix(X)) for X in mats))
     pattern.sort_indices()
-    cols = np.repeat(np.arange(pattern.shape[1]), np.diff(pattern.indptr))
-    values = [np.asarray(sp.csr_matrix(X)[pattern.indices, cols]).ravel() for X in mats]
+    n = pattern.shape[0]
+    cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr))
+    keys = cols * n + pattern.indices  # column-major, so sorted
+    values = []
+    for X in mats:  # each entry's slot in the pattern by its key (a binary search)
+        X = sp.csc_matrix(X, copy=True)
+        X.sum_duplicates()
+        x_cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(X.indptr))
+        v = np.zeros(pattern.nnz)
+        v[np.searchsorted(keys, x_cols * n + X.indices)] = X.data
+        values.append(v)
     return pattern, values
 
 
