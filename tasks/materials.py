@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -61,15 +62,26 @@ def compute(
 ) -> MaterialsOutput:
     """skin_labels (n_skin,), tet_labels (m,), E Pa, nu, eta Pa s, rho kg/m^3 per tet; PNG."""
     from physanim.fem.region_materials import tet_materials
+    from physanim.mesh import regions
     from physanim.mesh.params import REGION_NAMES
     from physanim.mesh.regions import plot_regions, region_areas, skin_regions, tet_regions
+    from physanim.store.file_cache import FileCache, content_digest
 
     landmarks = align.landmark_positions()
     scan_v, scan_f = align.scan_vertices, align.scan_faces
     scan_labels = skin_regions(scan_v, landmarks, params)
     labels = tet_regions(tetra.nodes, tetra.tets, scan_v, scan_labels)
     mats = tet_materials(labels, params.model)
-    plot_regions(scan_v, scan_f, scan_labels, ctx.files_dir / "regions.png", landmarks)
+    # the regions do not change with the material model: the figure comes from the cache
+    # on an edit (drawing its 55k triangles took most of the stage)
+    figure = content_digest(
+        Path(regions.__file__).read_bytes(), scan_v, scan_f, scan_labels, sorted(landmarks.items())
+    )
+    FileCache(ctx.dataset.run_dir / "cache" / "figures").make(
+        ctx.files_dir / "regions.png",
+        figure,
+        lambda out: plot_regions(scan_v, scan_f, scan_labels, out, landmarks),
+    )
     areas = region_areas(scan_v, scan_f, scan_labels)
     names = ["default", *REGION_NAMES]
     ctx.summary.update(

@@ -3,7 +3,6 @@ code), so that a re-run whose meshes did not change does not render them again."
 
 from __future__ import annotations
 
-import hashlib
 import os
 from pathlib import Path
 from typing import Any
@@ -11,6 +10,7 @@ from typing import Any
 import numpy as np
 
 import physanim.render.face as face
+from physanim.store.file_cache import FileCache, content_digest
 
 
 class TileCache:
@@ -18,31 +18,25 @@ class TileCache:
     ``folder`` (.npy); the ``keep`` most recently used stay."""
 
     def __init__(self, folder: Path, keep: int = 4) -> None:
-        self.folder, self.keep = folder, keep
+        self.files = FileCache(folder, keep)
 
     def render(self, **job: Any) -> np.ndarray:
         """``render_sequence(**job)``, or its earlier result for the same inputs."""
-        digest = hashlib.sha256(b"".join(f.read_bytes() for f in face.CODE_FILES))  # its code too
-        for name in sorted(job):
-            if name != "progress":
-                value = job[name]
-                data = value.tobytes() if isinstance(value, np.ndarray) else repr(value).encode()
-                digest.update(name.encode() + b"=" + data)
-        path = self.folder / f"{digest.hexdigest()[:32]}.npy"
-        if path.exists():
+        named = [(name, job[name]) for name in sorted(job) if name != "progress"]
+        code = b"".join(f.read_bytes() for f in face.CODE_FILES)  # its code too
+        digest = content_digest(code, *(part for pair in named for part in pair))
+        cached = self.files.fetch(digest, ".npy")
+        if cached is not None:
             try:
-                tiles = np.load(path)
-                path.touch()
+                tiles = np.load(cached)
                 if job.get("progress") is not None:
                     job["progress"](len(tiles), len(tiles))
                 return tiles
             except (OSError, ValueError):
-                path.unlink(missing_ok=True)
+                cached.unlink(missing_ok=True)
         tiles = face.render_sequence(**job)
-        self.folder.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.stem}.{os.getpid()}.npy")
+        self.files.folder.mkdir(parents=True, exist_ok=True)
+        tmp = self.files.folder / f".tiles.{os.getpid()}.npy"
         np.save(tmp, tiles)
-        tmp.replace(path)
-        for old in sorted(self.folder.glob("*.npy"), key=lambda p: p.stat().st_mtime)[: -self.keep]:
-            old.unlink(missing_ok=True)
+        self.files.store(digest, tmp, move=True)
         return tiles

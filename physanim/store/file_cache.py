@@ -1,0 +1,79 @@
+"""Outputs kept on disk by the content of what made them, so that a re-run whose inputs did
+not change reads them back instead of making them again (rendered tiles, figures that a
+material edit does not change). Not part of the stage store: losing the cache costs time only.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def content_digest(*parts: Any) -> str:
+    """sha256 (hex) of ``parts``: arrays by dtype, shape and bytes, bytes as they are, anything
+    else by its repr (so dicts, tuples and numbers by value)."""
+    digest = hashlib.sha256()
+    for part in parts:
+        if isinstance(part, np.ndarray):
+            digest.update(f"{part.dtype}{part.shape}".encode())
+            digest.update(np.ascontiguousarray(part).tobytes())
+        elif isinstance(part, bytes):
+            digest.update(part)
+        else:
+            digest.update(repr(part).encode())
+        digest.update(b"\x00")
+    return digest.hexdigest()
+
+
+class FileCache:
+    """Files by content digest in ``folder``; the ``keep`` most recently used stay."""
+
+    def __init__(self, folder: Path, keep: int = 16) -> None:
+        self.folder, self.keep = Path(folder), keep
+
+    def path(self, digest: str, suffix: str) -> Path:
+        return self.folder / f"{digest[:32]}{suffix}"
+
+    def fetch(self, digest: str, suffix: str) -> Path | None:
+        """The cached file of ``digest`` (marked as just used), or None."""
+        found = self.path(digest, suffix)
+        if not found.exists():
+            return None
+        found.touch()
+        return found
+
+    def store(self, digest: str, source: Path, move: bool = False) -> None:
+        """Keep ``source`` (a copy, or the file itself with ``move``, on the same disk) under
+        ``digest`` (written aside, then renamed, so a crash never leaves half a file); the
+        least recently used beyond ``keep`` go."""
+        target = self.path(digest, source.suffix)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        if move:
+            Path(source).replace(target)
+        else:
+            tmp = target.with_name(f".{target.stem}.{os.getpid()}{target.suffix}")
+            shutil.copyfile(source, tmp)
+            tmp.replace(target)
+        kept = sorted(
+            (p for p in self.folder.iterdir() if not p.name.startswith(".")),
+            key=lambda p: p.stat().st_mtime,
+        )
+        for old in kept[: -self.keep]:
+            old.unlink(missing_ok=True)
+
+    def make(self, out: Path, digest: str, producer: Callable[[Path], Any]) -> Path:
+        """``out`` copied from the cache when ``digest`` is there, else made by
+        ``producer(out)`` and kept."""
+        cached = self.fetch(digest, out.suffix)
+        if cached is not None:
+            shutil.copyfile(cached, out)
+            return out
+        producer(out)
+        self.store(digest, out)
+        return out
