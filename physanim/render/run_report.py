@@ -63,6 +63,15 @@ def shown_variants(store: StageStore, chain: Sequence[str]) -> list[str]:
     return shown
 
 
+def recent_variants(shown: Sequence[str], current: str | None, limit: int) -> list[str]:
+    """The last ``limit`` of ``shown`` (oldest first), ending with ``current`` when given (a
+    run that recomputed nothing keeps its first place among the recorded runs)."""
+    others = [k for k in shown if k != current]
+    if current is None:
+        return others[max(0, len(others) - limit) :]
+    return [*others[max(0, len(others) - limit + 1) :], current]
+
+
 def variant_row(summary: dict[str, Any]) -> dict[str, Any]:
     """One column of the variants table from an evaluation's summary."""
     fem = summary.get("fem", {})
@@ -119,7 +128,7 @@ def write_run_report(
         panel = video.parent / "frames" / f"{peak:04d}.png" if peak is not None else None
         if panel is not None and panel.exists():
             images.insert(0, (f"Panel at the jaw-drop peak (frame {peak})", panel))
-        variants = _compare_variants(pipeline, spec, store, out_dir, images)
+        variants = _compare_variants(pipeline, spec, store, out_dir, images, keys[spec.name])
 
     key_figures: dict[str, Any] = {}
     for s in shown:
@@ -157,22 +166,30 @@ def write_run_report(
     )
 
 
+#: Variants the run report compares: the most recent runs' (a store holds every edit ever run).
+MAX_VARIANTS = 8
+
+
 def _compare_variants(
     pipeline: Pipeline,
     spec: StageSpec[Any],
     store: StageStore,
     out_dir: Path,
     images: list[tuple[str, Path]],
+    this: str,
 ) -> dict[str, dict[str, Any]]:
-    """The variants table (label -> row) of every recorded run's evaluation by the current
-    code version; with more than one, their symmetry cost and mouth corners plotted together
-    (appended to ``images``)."""
+    """The variants table (label -> row) of the last ``MAX_VARIANTS`` recorded runs'
+    evaluations by the current code version, this run's (key ``this``) last; with more than
+    one, their symmetry cost and mouth corners plotted together (appended to ``images``)."""
     variants: dict[str, dict[str, Any]] = {}
     cost, mouth = {}, {}
     time = None
-    for k in shown_variants(store, pipeline.upstream(spec.name)):
-        if store.provenance(spec.name, k).get("version") != spec.version:
-            continue  # written by another code version: another output layout
+    current = [
+        k
+        for k in shown_variants(store, pipeline.upstream(spec.name))
+        if store.provenance(spec.name, k).get("version") == spec.version
+    ]  # another code version wrote another output layout
+    for k in recent_variants(current, this, MAX_VARIANTS):
         label = variant_label(pipeline, store, k)
         group = store.open(spec.name, k)
         ev = read_dataclass(FaceEvaluation, group)

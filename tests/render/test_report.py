@@ -66,3 +66,15 @@ def test_relative_paths_are_relative_to_the_working_directory(tmp_path, monkeypa
     png, _ = plot_symmetry_cost(np.arange(5.0), {"m1": np.zeros(5)}, out / "sym")
     path = build_report("runs/report", title="t", images=[("cost", "runs/report/sym.png")])
     assert png == out / "sym.png" and "src='sym.png'" in path.read_text()
+
+
+def test_run_report_compares_the_most_recent_variants_and_always_this_run():
+    from physanim.render.run_report import recent_variants
+
+    shown = [f"k{i}" for i in range(12)]  # oldest first, as the run manifests order them
+    assert recent_variants(shown, "k11", 8) == shown[4:]
+    # a run that recomputed nothing keeps its early place among the runs: still shown, last
+    assert recent_variants(shown, "k2", 8) == [*shown[5:], "k2"]
+    assert recent_variants(shown[:3], "k1", 8) == ["k0", "k2", "k1"]
+    assert recent_variants(shown[:3], None, 2) == ["k1", "k2"]
+    assert recent_variants(shown, "k0", 1) == ["k0"]
