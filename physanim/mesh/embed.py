@@ -8,6 +8,9 @@ part in the embedded surface exactly where the tissue is cut.
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
@@ -15,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from physanim.mesh.kinematic import blend_frames
 from physanim.mesh.seam import NONE, MouthLine
+from physanim.store.file_cache import FileCache, content_digest
 
 
 def embedding_matrix(
@@ -61,10 +65,24 @@ def embedded_displacements(
     tets: NDArray,
     mouth: MouthLine,
     displacements: NDArray,
+    cache: FileCache | None = None,
 ) -> NDArray:
     """Displacements (T, N, 3) m of ``points`` (N, 3) m (lip sides ``point_side`` (N,))
     embedded in a tet mesh (``nodes`` (n, 3) m, ``tets`` (M, 4)) cut along the lip seam
-    ``mouth``, from the node displacements (T, n, 3) m."""
+    ``mouth``, from the node displacements (T, n, 3) m. ``cache``: keeps the embedding by the
+    content of its inputs (a material edit does not change it)."""
     tet_side = mouth.side(np.asarray(nodes)[tets].mean(axis=1))
-    w = embedding_matrix(points, point_side, nodes, tets, tet_side)
+    args = (points, point_side, nodes, tets, tet_side)
+    if cache is None:
+        return blend_frames(embedding_matrix(*args), displacements)
+    digest = content_digest(Path(__file__).read_bytes(), *map(np.asarray, args))
+    found = cache.fetch(digest, ".npz")
+    if found is not None:
+        w = sp.csr_array(sp.load_npz(found))
+    else:
+        w = embedding_matrix(*args)
+        cache.folder.mkdir(parents=True, exist_ok=True)
+        tmp = cache.folder / f".embedding.{os.getpid()}.npz"
+        sp.save_npz(tmp, sp.csr_matrix(w))
+        cache.store(digest, tmp, move=True)
     return blend_frames(w, displacements)

@@ -133,6 +133,7 @@ def model_tiles(
     from physanim.render.colours import ColourMap
     from physanim.render.face import render_sequence
     from physanim.render.tile_cache import TileCache
+    from physanim.store.file_cache import FileCache
 
     size = (params.tile_width_px, params.tile_height_px)
     scan_v, scan_f = footage.scan_vertices, footage.scan_faces
@@ -140,7 +141,7 @@ def model_tiles(
     # the FEM tile shows the high-res scan embedded in the tets, moved by their displacement
     disp = embedded_displacements(
         scan_v, footage.scan_side, footage.nodes, footage.tets, footage.mouth,
-        footage.displacements[frames],
+        footage.displacements[frames], FileCache(cache_dir.with_name("embeddings"), keep=4),
     )  # fmt: skip
     magnitude_mm = np.linalg.norm(disp, axis=-1) * 1e3
     top = params.displacement_max_mm or max(float(magnitude_mm.max()), 1e-3)

@@ -61,7 +61,7 @@ class FileCache:
             shutil.copyfile(source, tmp)
             tmp.replace(target)
         kept = sorted(
-            (p for p in self.folder.iterdir() if not p.name.startswith(".")),
+            (p for p in self.folder.iterdir() if p.is_file() and not p.name.startswith(".")),
             key=lambda p: p.stat().st_mtime,
         )
         for old in kept[: -self.keep]:

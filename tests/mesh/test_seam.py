@@ -23,6 +23,7 @@ from physanim.mesh.seam import (
     cut_tets,
 )
 from physanim.mesh.tetra import orient_and_check
+from physanim.store.file_cache import FileCache
 
 #: a curved mouth line across the middle of the block (m)
 MOUTH = MouthLine(np.array([[-0.015, 0.0005, 0.0], [0.0, 0.0015, 0.0], [0.015, 0.0005, 0.0]]))
@@ -109,7 +110,7 @@ def test_surface_cut_and_binding_never_cross_the_seam() -> None:
     np.testing.assert_allclose(b.distance, 0.0, atol=1e-12)
 
 
-def test_embedding_reproduces_affine_motion_and_respects_the_seam() -> None:
+def test_embedding_reproduces_affine_motion_and_respects_the_seam(tmp_path) -> None:
     """Points embedded in tets move exactly with an affine node displacement; across the
     cut, upper-lip points follow only upper tets."""
     nodes, tets = block()
@@ -124,6 +125,15 @@ def test_embedding_reproduces_affine_motion_and_respects_the_seam() -> None:
     np.testing.assert_allclose(w @ u, pts @ a.T + np.array([1e-3, 0.0, -2e-3]), atol=1e-12)
     frames = embedded_displacements(pts, MOUTH.side(pts), x, t, MOUTH, np.stack([0 * u, u, 2 * u]))
     np.testing.assert_allclose(frames, np.stack([0 * w @ u, w @ u, 2 * w @ u]), atol=1e-12)
+    # through a cache: the same answer, the embedding found once for these inputs
+    cache, motion = FileCache(tmp_path / "embeddings"), np.stack([0 * u, u, 2 * u])
+    for _ in range(2):
+        cached = embedded_displacements(pts, MOUTH.side(pts), x, t, MOUTH, motion, cache)
+        np.testing.assert_array_equal(cached, frames)
+        assert len(list(cache.folder.iterdir())) == 1
+    moved_pts = pts + 1e-4
+    embedded_displacements(moved_pts, MOUTH.side(moved_pts), x, t, MOUTH, motion, cache)
+    assert len(list(cache.folder.iterdir())) == 2
     np.testing.assert_allclose(frames[2], 2 * (pts @ a.T + [1e-3, 0.0, -2e-3]), atol=1e-12)
     # open the lips: lower side nodes drop; upper-lip points do not follow
     drop = np.where((cut.side == LOWER)[:, None], [0.0, -1e-3, 0.0], 0.0)
