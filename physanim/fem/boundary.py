@@ -89,20 +89,21 @@ class SpringForce:
     frame_dt: float
     n_free: int
 
-    def _at(self, times: NDArray) -> NDArray:
+    def at(self, times: NDArray) -> NDArray:
+        """(len(times), 3S) forces on the spring DOFs, N."""
         t = self.springs.targets.reshape(len(self.springs.targets), -1)
         return catmull_rom(t, self.frame_dt, times)[0] * np.repeat(self.springs.stiffness, 3)
 
     def free(self, times: NDArray) -> NDArray:
         """(len(times), n_free) forces on the free DOFs, N."""
         out = np.zeros((len(times), self.n_free))
-        out[:, self.positions] = self._at(times)
+        out[:, self.positions] = self.at(times)
         return out
 
     def full(self, time: float, n_dofs: int) -> NDArray:
         """(n_dofs,) forces at one time, N."""
         out = np.zeros(n_dofs)
-        out[self.dofs] = self._at(np.array([time]))[0]
+        out[self.dofs] = self.at(np.array([time]))[0]
         return out
 
 
