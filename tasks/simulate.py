@@ -21,7 +21,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from pydantic import ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer
+from pydantic import (
+    ConfigDict,
+    Field,
+    SerializerFunctionWrapHandler,
+    model_serializer,
+    model_validator,
+)
 
 from physanim.face.jaw import JawMotion
 from physanim.face.params import DriveParams, JawParams
@@ -44,6 +50,14 @@ class SimulateStageParams(SimulateParams):
     reduced: ReducedParams = Field(
         default_factory=ReducedParams, description="reduced (POD) preview of material edits"
     )
+
+    @model_validator(mode="after")
+    def _preview_is_linear(self) -> SimulateStageParams:
+        if self.reduced.enabled and self.corotational:
+            raise ValueError(
+                "reduced.enabled: the reduced preview is linear; set corotational: false"
+            )
+        return self
 
     @model_serializer(mode="wrap")
     def _without_disabled_preview(self, handler: SerializerFunctionWrapHandler) -> dict:

@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
@@ -30,6 +31,7 @@ from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel
 from physanim.fem.monitors import InversionMonitor, StressMonitor
 from physanim.fem.newmark import State
+from physanim.fem.numba_threads import faster_thread_count, keeps_thread_count
 from physanim.fem.simulate import SimResult
 from physanim.fem.statics import free_dofs
 
@@ -142,6 +144,7 @@ class ReducedRun:
     qdd: NDArray
 
 
+@keeps_thread_count
 def simulate_reduced(
     model: FemModel,
     bc: BoundaryConditions,
@@ -180,39 +183,43 @@ def simulate_reduced(
 
     t0 = time.perf_counter()
     frame_dt, n_frames = bc.frame_dt, bc.n_frames
-    d_c, v_c, a_c = (x[0, moving] for x in bc.prescribed(np.zeros(1)))
-    g0 = _spring_load(force, phi_springs, np.zeros(1))[0]
-    q = _cholesky(red.k)(g0 - red.bk @ d_c)
+    # every substep's time and step size, and the loads there, at once
+    frame = np.repeat(np.arange(1, n_frames), substeps[1:])  # (S,) frame each step leads to
+    h = frame_dt / substeps[frame]
+    first = np.r_[0, np.cumsum(substeps[1:])[:-1]]  # index of each frame's first step
+    times = (frame - 1) * frame_dt + h * (np.arange(len(frame)) - first[frame - 1] + 1)
+    d_m, v_m, a_m = (x[:, moving] for x in bc.prescribed(np.r_[0.0, times]))
+    load = _spring_load(force, phi_springs, np.r_[0.0, times])
+    load -= d_m @ red.bk.T + v_m @ red.bc.T + a_m @ red.bm.T  # (S + 1, r), N
+    q = _cholesky(red.k)(load[0] + red.bc @ v_m[0] + red.bm @ a_m[0])  # static: K q = f
     qd = np.zeros(basis.size)
-    qdd = _cholesky(red.m)(g0 - red.k @ q - red.bk @ d_c - red.bc @ v_c - red.bm @ a_c)
+    qdd = _cholesky(red.m)(load[0] - red.k @ q)
+    steps = np.zeros((len(frame) + 1, basis.size))
+    steps[0] = q
     qs = np.zeros((n_frames, basis.size))
     qds, qdds = np.zeros_like(qs), np.zeros_like(qs)
     qs[0], qds[0], qdds[0] = q, qd, qdd
+    solvers: dict[float, Callable[[NDArray], NDArray]] = {}
+    for s, step in enumerate(h):
+        if step not in solvers:
+            solvers[step] = _cholesky(red.k + (4 / step**2) * red.m + (2 / step) * red.c)
+        rhs = red.m @ ((4 / step**2) * q + (4 / step) * qd + qdd) + red.c @ ((2 / step) * q + qd)
+        q_new = solvers[step](rhs + load[s + 1])
+        qdd_new = (4 / step**2) * (q_new - q) - (4 / step) * qd - qdd
+        qd = qd + 0.5 * step * (qdd + qdd_new)
+        q, qdd = q_new, qdd_new
+        steps[s + 1] = q
+        k = frame[s]
+        if s + 1 == len(h) or frame[s + 1] != k:
+            qs[k], qds[k], qdds[k] = q, qd, qdd
+            if progress is not None:
+                progress(k, n_frames - 1)
+    # viscous dissipation of each step: delta^T C delta / h over free and moving DOFs
+    dq, dc = np.diff(steps, axis=0), np.diff(d_m, axis=0)
+    work = np.einsum("si,ij,sj->s", dq, red.c, dq) + 2 * np.einsum("si,im,sm->s", dq, red.bc, dc)
+    work += np.einsum("sm,sm->s", dc, (red.c_mm @ dc.T).T)
     heat = np.zeros(n_frames)
-    solvers: dict[int, Callable[[NDArray], NDArray]] = {}
-    for k in range(1, n_frames):
-        n_sub = int(substeps[k])
-        h = frame_dt / n_sub
-        if n_sub not in solvers:
-            solvers[n_sub] = _cholesky(red.k + (4 / h**2) * red.m + (2 / h) * red.c)
-        solve = solvers[n_sub]
-        times = (k - 1) * frame_dt + h * np.arange(1, n_sub + 1)
-        dd, vv, aa = (x[:, moving] for x in bc.prescribed(times))
-        load = _spring_load(force, phi_springs, times) - dd @ red.bk.T - vv @ red.bc.T
-        load -= aa @ red.bm.T
-        steps_c = np.diff(np.vstack([d_c, dd]), axis=0)  # (n_sub, n_m) prescribed increments
-        for j in range(n_sub):
-            rhs = red.m @ ((4 / h**2) * q + (4 / h) * qd + qdd) + red.c @ ((2 / h) * q + qd)
-            q_new = solve(rhs + load[j])
-            qdd_new = (4 / h**2) * (q_new - q) - (4 / h) * qd - qdd
-            qd = qd + 0.5 * h * (qdd + qdd_new)
-            dq, dc = q_new - q, steps_c[j]
-            heat[k] += (dq @ red.c @ dq + 2 * dq @ (red.bc @ dc) + dc @ (red.c_mm @ dc)) / h
-            q, qdd = q_new, qdd_new
-        d_c = dd[-1]
-        qs[k], qds[k], qdds[k] = q, qd, qdd
-        if progress is not None:
-            progress(k, n_frames - 1)
+    np.add.at(heat, frame, work / h)
     t_step = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -272,6 +279,8 @@ def _monitored(
     monitors = (StressMonitor(model, n_frames), InversionMonitor(model, n_frames))
     out = np.zeros((n_frames, len(model.nodes), 3), dtype=np.float32)
     state = State.rest(model.n_dofs)
+    probe = state.d[model.dofs]
+    faster_thread_count(lambda: model.von_mises(probe), numba.get_num_threads())
     for k in range(n_frames):
         state.d[basis.free], state.d[pres] = basis.phi @ q[k], d_c[k]
         out[k] = state.d.reshape(-1, 3)
