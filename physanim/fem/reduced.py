@@ -281,8 +281,9 @@ def _monitored(
     state = State.rest(model.n_dofs)
     probe = state.d[model.dofs]
     faster_thread_count(lambda: model.von_mises(probe), numba.get_num_threads())
+    d_free = q @ basis.phi.T  # (T, n_u), one product
     for k in range(n_frames):
-        state.d[basis.free], state.d[pres] = basis.phi @ q[k], d_c[k]
+        state.d[basis.free], state.d[pres] = d_free[k], d_c[k]
         out[k] = state.d.reshape(-1, 3)
         u_elem = state.d[model.dofs]
         for monitor in monitors:
