@@ -145,30 +145,47 @@ def basis_model(params: ReducedParams) -> MaterialModel:
     return params.basis_model or UNIFORM
 
 
+#: bases kept in the cache (the most recently used; about 20 MB each on the demo)
+KEEP = 4
+
+
 def load_or_build_basis(
     ctx: StageContext[Any], args: dict[str, Any], materials: MaterialsOutput
 ) -> dict[str, Any]:
     """The basis (``phi``, ``free``, ``singular_values``, ``substeps``, exact error of the
     basis material's own preview ``basis_error_peak``/``_rms``, ``basis_run``, ``seconds``)
-    from the cache, built under a lock when missing."""
+    from the cache, built under a lock when missing or unreadable; the ``KEEP`` most recently
+    used bases stay."""
     key = _key(ctx, materials)
     folder = ctx.dataset.run_dir / "cache" / "reduced-basis"
     path = folder / f"{key}.npz"
     with _locked(folder / f"{key}.lock"):
-        if not path.exists():
+        out = _read(path)
+        cached = out is not None
+        if out is None:
             t0 = time.perf_counter()
             built = _build(ctx, args, materials)
             built["seconds"] = np.float64(time.perf_counter() - t0)
             partial = folder / f"{key}.partial.npz"  # renamed into place: never half-written
             np.savez(partial, **built)
             os.replace(partial, path)
-            cached = False
-        else:
-            cached = True
-    with np.load(path) as data:
-        out = {k: data[k] for k in data.files}
+            out = built
+        path.touch()
+    done = [p for p in folder.glob("*.npz") if not p.name.endswith(".partial.npz")]
+    for old in sorted(done, key=lambda p: p.stat().st_mtime)[:-KEEP]:
+        old.unlink(missing_ok=True)
+        old.with_suffix(".lock").unlink(missing_ok=True)
     out["cached"], out["key"] = cached, key
     return out
+
+
+def _read(path: Path) -> dict[str, Any] | None:
+    """A cached basis, or None when absent or unreadable (then rebuilt)."""
+    try:
+        with np.load(path) as data:
+            return {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError):
+        return None
 
 
 def _build(ctx: StageContext[Any], args: dict[str, Any], materials: MaterialsOutput) -> dict:
