@@ -4,7 +4,8 @@ The boundary conditions come from the library (``physanim.face.drive``): skull n
 mandible nodes turned by the jaw rotation estimated from the tracked landmarks, and the skin
 pulled by landmark springs (default), by the kinematic scan, or prescribed at single nodes (the
 seed, ``configs/drives/seed.yaml``), chosen by ``physanim.face.performance``.  Outputs at the
-capture frame rate.
+capture frame rate. With ``simulate.reduced.enabled`` the tissue runs in a reduced (POD) model
+built from a full run of a basis material instead (``tasks.preview``), for fast previews.
 
 Version 4: the output is declared by :class:`SimulateOutput`; a disabled jaw is stored as a
 null ``jaw`` attribute (before: absent).
