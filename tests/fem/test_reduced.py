@@ -131,3 +131,18 @@ def test_bad_input_is_refused_with_the_rule() -> None:
     other = reduced.PodBasis(basis.phi[:-3], basis.free[:-3], basis.singular_values)
     with pytest.raises(ValueError, match="other free DOFs"):
         reduced.simulate_reduced(model, bc, other, np.ones(5, dtype=np.int64))
+
+
+def test_a_disabled_preview_leaves_the_simulate_key_alone() -> None:
+    """Full runs keep their stage keys: a disabled ``reduced`` section is not dumped (the key
+    is made from the dump); an enabled one is, and round-trips through the provenance."""
+    from tasks.simulate import SimulateStageParams
+
+    assert "reduced" not in SimulateStageParams().model_dump(mode="json")
+    off = SimulateStageParams(reduced={"enabled": False, "max_modes": 10})
+    assert off.model_dump(mode="json") == SimulateStageParams().model_dump(mode="json")
+    on = SimulateStageParams(reduced={"enabled": True})
+    assert on.model_dump(mode="json")["reduced"]["enabled"] is True
+    assert SimulateStageParams.model_validate(on.model_dump(mode="json")) == on
+    with pytest.raises(ValueError, match="set corotational: false"):
+        SimulateStageParams(reduced={"enabled": True}, corotational=True)
