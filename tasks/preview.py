@@ -270,25 +270,30 @@ def preview(
     }
     full_key = full_run_key(ctx, dict(ctx.upstream))
     seconds = {"basis": t_basis, "assembly": t_asm, **result.timings}
+    pair = None  # (displacements, reference) whose difference is the error
     if ctx.store.has("simulate", full_key):
         full = read_dataclass(SimulateOutput, ctx.store.open("simulate", full_key))
-        error = reduced.displacement_error(result.displacements, full.displacements)
+        pair = (result.displacements, full.displacements)
         summary["error"] = "exact: against this variant's full run " + full_key[:12]
     elif params.reduced.estimate:
         t0 = time.perf_counter()
         est = reduced.residual_estimate(model, bc, basis, run, params.solver)
         seconds["estimate"] = time.perf_counter() - t0
         # |(u + e) - u| against u: the estimated error relative to the preview's own size
-        error = reduced.displacement_error(result.displacements + est, result.displacements)
+        pair = (result.displacements + est, result.displacements)
         summary["error"] = "estimate: full-model residual of the preview (no full run stored)"
     else:
-        error = None
         summary["error"] = (
             "not measured: no full run of this variant in the store "
             "(simulate.reduced.estimate: true estimates it)"
         )
-    if error is not None:
+    if pair is not None:
+        error = reduced.displacement_error(*pair)
         summary["error_peak_pct"] = round(100 * error["peak"], 4)
         summary["error_rms_pct"] = round(100 * error["rms"], 4)
+        regions = reduced.region_errors(
+            *pair, args["tets"], materials.tet_labels, materials.region_names
+        )
+        summary["error_peak_pct_by_region"] = {k: round(100 * v, 4) for k, v in regions.items()}
     summary["seconds"] = {k: round(v, 3) for k, v in seconds.items()}
     return result, summary

@@ -354,6 +354,22 @@ def displacement_error(
     }
 
 
+def region_errors(
+    displacements: NDArray, reference: NDArray, tets: NDArray, labels: NDArray, names: list[str]
+) -> dict[str, float]:
+    """Per region: max over frames and the nodes of its tets (labels (M,) index ``names``) of
+    |u - u_ref|, over the whole run's max |u_ref| (so the regions' figures compare);
+    displacements and reference (T, N, 3) m."""
+    diff = np.linalg.norm(np.asarray(displacements, np.float64) - reference, axis=2).max(axis=0)
+    peak = float(np.linalg.norm(np.asarray(reference, np.float64), axis=2).max())
+    out = {}
+    for j, name in enumerate(names):
+        nodes = np.unique(np.asarray(tets)[np.asarray(labels) == j])
+        if nodes.size:
+            out[name] = float(diff[nodes].max()) / peak if peak > 0 else 0.0
+    return out
+
+
 def residual_estimate(
     model: FemModel,
     bc: BoundaryConditions,

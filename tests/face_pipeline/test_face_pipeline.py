@@ -234,6 +234,8 @@ def test_reduced_preview_of_a_model_against_its_full_run(model_sweep, demo_run) 
     default = {e.stage: e.key for e in make_plan(FACE, demo_run[1], store)}
     assert reduced["basis_run"] == default["simulate"] and not reduced["basis_cached"]
     assert reduced["error"].startswith("exact") and 0 < reduced["error_peak_pct"] < 2.0
+    by_region = reduced["error_peak_pct_by_region"]
+    assert max(by_region.values()) == pytest.approx(reduced["error_peak_pct"], abs=1e-4)
     assert reduced["basis_error_peak_pct"] < 0.5 and 0 < reduced["modes"] <= 150
     assert summary["stepping"] == "reduced (POD preview)"
     # a stiffer uniform material, the whole pipeline: the basis is reused, the report made

@@ -111,6 +111,8 @@ def test_an_edited_material_previewed_in_the_basis_of_another(edited_block, sens
     estimate = reduced.displacement_error(u + est_field, u)
     print(f"modes {basis.size}: error {error}, estimate {estimate}")
     assert error["peak"] < (0.012 if sensitivities else 0.08)
+    regions = reduced.region_errors(u, full_edit.displacements, tets, labels, ["left", "right"])
+    assert max(regions.values()) == pytest.approx(error["peak"])  # every node is in a region
     assert error["peak"] / 2 < estimate["peak"] < 2 * error["peak"]
     # the basis material itself, previewed in its own basis: the truncation alone
     own = reduced.simulate_reduced(model_base, bc, basis, full_base.frame_substeps)
