@@ -4,7 +4,8 @@ The boundary conditions come from the library (``physanim.face.drive``): skull n
 mandible nodes turned by the jaw rotation estimated from the tracked landmarks, and the skin
 pulled by landmark springs (default), by the kinematic scan, or prescribed at single nodes (the
 seed, ``configs/drives/seed.yaml``), chosen by ``physanim.face.performance``.  Outputs at the
-capture frame rate.
+capture frame rate. With ``simulate.reduced.enabled`` the tissue runs in a reduced (POD) model
+built from a full run of a basis material instead (``tasks.preview``), for fast previews.
 
 Version 4: the output is declared by :class:`SimulateOutput`; a disabled jaw is stored as a
 null ``jaw`` attribute (before: absent).
@@ -25,7 +26,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from pydantic import ConfigDict, Field
+from pydantic import (
+    ConfigDict,
+    Field,
+    SerializerFunctionWrapHandler,
+    model_serializer,
+    model_validator,
+)
 
 from physanim.face.jaw import JawMotion
 from physanim.face.params import DriveParams, JawParams
@@ -34,6 +41,7 @@ from physanim.fem.simulate import SimResult, simulate
 from physanim.pipeline import StageContext, StageSpec
 from tasks.align import AlignOutput
 from tasks.materials import MaterialsOutput
+from tasks.preview import ReducedParams
 from tasks.tetra import TetraOutput
 from tasks.track import TrackOutput
 
@@ -44,6 +52,25 @@ class SimulateStageParams(SimulateParams):
     model_config = ConfigDict(extra="forbid")
     drive: DriveParams = Field(default_factory=DriveParams, description="skin drive")
     jaw: JawParams = Field(default_factory=JawParams, description="mandible motion")
+    reduced: ReducedParams = Field(
+        default_factory=ReducedParams, description="reduced (POD) preview of material edits"
+    )
+
+    @model_validator(mode="after")
+    def _preview_is_linear(self) -> SimulateStageParams:
+        if self.reduced.enabled and self.corotational:
+            raise ValueError(
+                "reduced.enabled: the reduced preview is linear; set corotational: false"
+            )
+        return self
+
+    @model_serializer(mode="wrap")
+    def _without_disabled_preview(self, handler: SerializerFunctionWrapHandler) -> dict:
+        """A disabled preview changes nothing: left out of the dump, so of the stage key."""
+        data = handler(self)
+        if not self.reduced.enabled:
+            data.pop("reduced", None)
+        return data
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -111,10 +138,23 @@ def compute(
     from physanim.face.performance import performance_summary
 
     args, drive = simulate_inputs(track, align, tetra, materials, params)
-    result = simulate(**args, params=params, progress=ctx.progress("simulate"))
-    ctx.summary.update(
-        performance_summary(result, drive, int(tetra.skin.sum()), params, params.drive.mode)
-    )
+    if params.reduced.enabled:
+        from tasks.preview import preview
+
+        result, reduced_summary = preview(ctx, args, materials)
+    else:
+        result = simulate(**args, params=params, progress=ctx.progress("simulate"))
+    summary = performance_summary(result, drive, int(tetra.skin.sum()), params, params.drive.mode)
+    if params.reduced.enabled:
+        summary.update(
+            stepping="reduced (POD preview)",
+            check_steps=0,
+            seconds=reduced_summary.pop("seconds"),
+            reduced=reduced_summary,
+        )
+        for k in ("frames_over_tolerance", "solver_threads", "blas"):
+            summary.pop(k)
+    ctx.summary.update(summary)
     springs = drive.springs
     return SimulateOutput(
         **vars(result),  # the SimResult fields

@@ -97,20 +97,21 @@ class SpringForce:
         forces = targets * np.repeat(self.springs.stiffness, 3)
         return forces, tangents(forces, self.frame_dt)
 
-    def _at(self, times: NDArray) -> NDArray:
+    def at(self, times: NDArray) -> NDArray:
+        """(len(times), 3S) forces on the spring DOFs, N."""
         forces, tang = self._forces
         return catmull_rom(forces, self.frame_dt, times, tang)[0]
 
     def free(self, times: NDArray) -> NDArray:
         """(len(times), n_free) forces on the free DOFs, N."""
         out = np.zeros((len(times), self.n_free))
-        out[:, self.positions] = self._at(times)
+        out[:, self.positions] = self.at(times)
         return out
 
     def full(self, time: float, n_dofs: int) -> NDArray:
         """(n_dofs,) forces at one time, N."""
         out = np.zeros(n_dofs)
-        out[self.dofs] = self._at(np.array([time]))[0]
+        out[self.dofs] = self.at(np.array([time]))[0]
         return out
 
 

@@ -1,0 +1,116 @@
+"""Reduced (POD) previews of material variants against their full FEM runs, on the demo.
+
+For the uniform model (the basis material) and the seed's models 1-3, side by side in one
+run: the full ``simulate`` wall time (the library call the stage makes, default settings),
+the reduced preview's wall time (assembly of the variant's K, M, C, projection, Newmark in
+the basis, reconstruction and stress monitors), and the preview's error against the
+variant's full run (peak |u - u_full| / peak |u_full|, and RMS), with the residual estimate
+that a variant without a full run would get, and its extra time. The basis (the uniform run's
+snapshots plus region sensitivities, ``simulate.reduced`` defaults) is built once and timed
+apart. Medians over ``--repeats`` runs (default 1: a full run takes 10-30 s here).
+
+Run: .venv/bin/python benchmarks/bench_reduced.py [--repeats 3]
+The demo's upstream stages (default config and each model's materials) are computed into
+data/demo first when the store lacks them (several minutes, once).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+from flows.dags import FACE
+from physanim.config import load_config
+from physanim.fem import reduced
+from physanim.fem.model import build_model
+from physanim.fem.simulate import simulate
+from physanim.fem.statics import free_dofs
+from physanim.pipeline import stage_inputs
+from physanim.pipeline.progress import rich_progress
+from physanim.pipeline.spec import dataset_overrides
+from tasks.preview import ReducedParams, conditions
+from tasks.simulate import SimulateStageParams, simulate_inputs
+
+MODELS = ("uniform", "model1", "model2", "model3")
+
+
+def variant_inputs(model: str) -> tuple[dict[str, Any], Any, SimulateStageParams]:
+    """``simulate`` arguments, the materials output and the stage params of one model."""
+    files = [FACE.default_config]
+    if model != "uniform":
+        files.append(Path("configs/models") / f"{model}.yaml")
+    config, _ = load_config(FACE.config_model(), files, dataset_overrides("demo"))
+    with rich_progress() as progress:
+        inputs = stage_inputs(FACE, config, "simulate", progress)
+    params = config.section("simulate", SimulateStageParams)
+    args, _ = simulate_inputs(**inputs, params=params)
+    return args, inputs["materials"], params
+
+
+def timed(repeats: int, fn):
+    """(median wall s, last result) of ``fn()`` over ``repeats`` calls."""
+    walls, out = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        walls.append(time.perf_counter() - t0)
+    return statistics.median(walls), out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--repeats", type=int, default=1)
+    opts = parser.parse_args()
+    variants = {m: variant_inputs(m) for m in MODELS}
+    full = {}
+    for m, (args, _, params) in variants.items():
+        full[m] = timed(opts.repeats, lambda a=args, p=params: simulate(**a, params=p))
+        print(f"full run {m}: {full[m][0]:.1f} s")
+
+    args, materials, params = variants["uniform"]
+    settings = ReducedParams()
+    base = full["uniform"][1]
+    bc = conditions(args)
+    t0 = time.perf_counter()
+    model = build_model(args["nodes"], args["tets"], args["materials"], params)
+    rebuild = lambda mats: build_model(args["nodes"], args["tets"], mats, params)  # noqa: E731
+    extra = reduced.material_sensitivities(
+        model, bc, base.displacements, base.times, materials.tet_labels, rebuild,
+        args["materials"], settings.sensitivity_modes, params.solver,
+    )  # fmt: skip
+    free = free_dofs(model.n_dofs, bc.prescribed_dofs)
+    basis = reduced.pod_basis(base.displacements, free, settings.energy, settings.max_modes, extra)
+    t_basis = time.perf_counter() - t0
+    print(
+        f"basis: {basis.size} modes ({len(free)} free DOFs), energy {basis.energy:.7f}, "
+        f"built in {t_basis:.1f} s from the uniform run (once per sweep)\n"
+    )
+    print(
+        f"{'variant':9s} {'full s':>7s} {'preview s':>9s} {'speed-up':>8s} "
+        f"{'err % peak':>10s} {'err % rms':>9s} {'estimate % peak':>15s} {'estimate s':>10s}"
+    )
+    for m, (args, _, params) in variants.items():
+
+        def preview(a=args, p=params):
+            variant = build_model(a["nodes"], a["tets"], a["materials"], p)
+            return variant, reduced.simulate_reduced(variant, bc, basis, base.frame_substeps)
+
+        wall, (variant, run) = timed(opts.repeats, preview)
+        u = run.result.displacements
+        error = reduced.displacement_error(u, full[m][1].displacements)
+        t0 = time.perf_counter()
+        est = reduced.residual_estimate(variant, bc, basis, run, params.solver)
+        t_est = time.perf_counter() - t0
+        estimate = reduced.displacement_error(u + est, u)
+        print(
+            f"{m:9s} {full[m][0]:7.1f} {wall:9.2f} {full[m][0] / wall:7.1f}x "
+            f"{100 * error['peak']:10.3f} {100 * error['rms']:9.3f} "
+            f"{100 * estimate['peak']:15.3f} {t_est:10.2f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
