@@ -77,10 +77,14 @@ def write_stereo_calibration(path: Path, rig: CameraRig, fps: float) -> None:
     fs.release()
 
 
-def _write_png(path: Path, image: np.ndarray) -> None:
+def _write_png(image: np.ndarray, *paths: Path) -> None:
+    """Encode an RGB (H, W, 3) or single-channel (H, W) image once and write it to ``paths``."""
     img = cv2.cvtColor(image, cv2.COLOR_RGB2BGR) if image.ndim == 3 else image
-    if not cv2.imwrite(str(path), img):
-        raise OSError(f"{path}: cannot write image")
+    ok, png = cv2.imencode(".png", img)
+    if not ok:
+        raise OSError(f"{paths[0]}: cannot encode the image as PNG")
+    for path in paths:
+        path.write_bytes(png.tobytes())
 
 
 def generate_demo(
@@ -238,10 +242,10 @@ def _generate_into(
     ) as bag:
         for t, frame in enumerate(_rendered_frames(scene, workers)):
             name = f"{t:06d}.png"
-            _write_png(root / "rgbd" / "color" / name, frame.color)
-            _write_png(root / "rgbd" / "depth" / name, frame.depth)
-            _write_png(root / "stereo" / "left" / name, frame.color)
-            _write_png(root / "stereo" / "right" / name, frame.color_right)
+            # the stereo pair's left camera is the colour camera: the same image in both
+            _write_png(frame.color, root / "rgbd" / "color" / name, root / "stereo" / "left" / name)
+            _write_png(frame.depth, root / "rgbd" / "depth" / name)
+            _write_png(frame.color_right, root / "stereo" / "right" / name)
             bag.add_frame(frame.color, frame.depth, perf.times[t])
             gt_arr["vertices_actor"][t] = frame.vertices
             gt_arr["depth_true"][t] = frame.depth_true
