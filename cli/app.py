@@ -146,8 +146,6 @@ def run(
     t0 = time.perf_counter()
     dag, cfg = target.pipeline, target.config
     _tidy_up()
-    if not local:
-        _start_prefect_early(cfg)
     _prepare(dag, cfg)
     store, entries = _plan(target, only, start, force, checksums=verify)
     for leftover in store.remove_stale_temporaries():
@@ -193,18 +191,6 @@ def _executor(
     from flows.executors import PrefectExecutor
 
     return PrefectExecutor(home, name=f"physanim-{dag.name}", progress=progress)
-
-
-def _start_prefect_early(cfg: PipelineConfig) -> None:
-    """On a dataset's first run (no run recorded in its store), every stage will run after the
-    data is prepared (the demo takes tens of seconds to generate): start Prefect's shared server
-    now, without waiting, so that its startup overlaps that."""
-    store = cfg.dataset.store_path
-    if store.is_dir() and StageStore(store, create=False).runs():
-        return
-    from flows.prefect_env import configure, start_shared_server
-
-    start_shared_server(configure(cfg.dataset.run_dir))
 
 
 def _prepare(dag: Pipeline, cfg: PipelineConfig) -> None:

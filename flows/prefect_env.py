@@ -5,9 +5,7 @@ run directory keeps runs (and tests) away from the user's own Prefect profile.  
 ``PREFECT_API_URL`` every flow run would start a temporary local API server (SQLite), whose
 startup takes 10-25 s here; ``shared_server`` instead keeps one server per ``PREFECT_HOME``
 running between runs (same database, so the UI shows every run) and stops it after
-``PHYSANIM_PREFECT_IDLE_S`` seconds (default 600) without a run. ``start_shared_server``
-starts that server without waiting for it, so that its startup overlaps other work (a cold run
-generating the demo dataset).
+``PHYSANIM_PREFECT_IDLE_S`` seconds (default 600) without a run.
 """
 
 from __future__ import annotations
@@ -31,7 +29,6 @@ from physanim.processes import OWNER_ENV, mark_children, process_alive, start_ti
 #: Seconds a shared server waits for the next run before it stops (``shared_server``).
 IDLE_ENV = "PHYSANIM_PREFECT_IDLE_S"
 _STATE, _LEASE, _LOCK = "server.json", "server.lease", "server.lock"
-_STARTING = "server.starting"
 
 #: Settings applied unless the user already set them in the environment.
 DEFAULTS = {
@@ -126,57 +123,14 @@ def _running_shared(home: Path) -> str | None:
     return url if alive and _healthy(url) else None
 
 
-def _spawn_supervisor(home: Path) -> None:
-    """Start ``python -m flows.prefect_env HOME`` detached (not marked as this process's, so
-    orphan clean-up leaves it alone) and note its pid in ``home``'s ``server.starting``."""
-    env = {k: v for k, v in os.environ.items() if k != OWNER_ENV}
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "flows.prefect_env", str(home)],
-        env=env, cwd=Path(__file__).resolve().parents[1], start_new_session=True,
-        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
-    note = {"pid": proc.pid, "started": start_time(proc.pid) or time.time()}
-    tmp = home / f".{_STARTING}.{os.getpid()}"
-    tmp.write_text(json.dumps(note))
-    tmp.replace(home / _STARTING)
-
-
-def _starting(home: Path) -> int | None:
-    """Pid of the supervisor last started for ``home`` while it runs (starting its server or
-    serving it), else None."""
-    try:
-        note = json.loads((home / _STARTING).read_text())
-        pid, started = int(note["pid"]), float(note["started"])
-    except (OSError, ValueError, KeyError):
-        return None
-    alive = process_alive(pid) and abs((start_time(pid) or started) - started) < 2.0
-    return pid if alive else None
-
-
-def start_shared_server(home: Path) -> None:
-    """Start the shared server of ``home`` (see ``shared_server``) in the background unless one
-    runs or is starting, and return at once: its 10-25 s startup then overlaps the caller's
-    next work. Does nothing when PREFECT_API_URL is set."""
-    if os.environ.get("PREFECT_API_URL"):
-        return
-    home = Path(home)
-    home.mkdir(parents=True, exist_ok=True)
-    with (home / _LOCK).open("a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        (home / _LEASE).touch()  # the idle time counts from now
-        if _running_shared(home) is None and _starting(home) is None:
-            _spawn_supervisor(home)
-
-
 @contextlib.contextmanager
 def shared_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple[str, bool]]:
     """Yield (API URL, started_now) of the Prefect server shared by the runs of ``home``.
 
     PREFECT_API_URL wins when it answers. Otherwise the server that an earlier run of this
-    home left running (or that ``start_shared_server`` is starting) is reused, or one is
-    started: ``python -m flows.prefect_env HOME`` (a detached supervisor, not marked as this
-    process's, so orphan clean-up leaves it alone) runs ``prefect server start`` and stops it,
-    and itself, once no run has used it for
+    home left running is reused, or one is started: ``python -m flows.prefect_env HOME`` (a
+    detached supervisor, not marked as this process's, so orphan clean-up leaves it alone)
+    runs ``prefect server start`` and stops it, and itself, once no run has used it for
     PHYSANIM_PREFECT_IDLE_S seconds or when ``home`` is removed. While the caller runs, a
     thread renews the lease every few seconds.
     """
@@ -192,11 +146,15 @@ def shared_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple[
         lease.touch()
         url, started = _running_shared(home), False
         if url is None:
-            if _starting(home) is None:
-                _spawn_supervisor(home)
+            env = {k: v for k, v in os.environ.items() if k != OWNER_ENV}
+            subprocess.Popen(
+                [sys.executable, "-m", "flows.prefect_env", str(home)],
+                env=env, cwd=Path(__file__).resolve().parents[1], start_new_session=True,
+                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            )  # fmt: skip
             deadline = time.time() + startup_timeout
             while (url := _running_shared(home)) is None:
-                if time.time() > deadline or _starting(home) is None:
+                if time.time() > deadline:
                     raise RuntimeError(f"prefect server did not start; see {home / 'server.log'}")
                 time.sleep(0.25)
             started = True

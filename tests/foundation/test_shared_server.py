@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from flows.prefect_env import IDLE_ENV, shared_server, start_shared_server
+from flows.prefect_env import IDLE_ENV, shared_server
 from physanim.processes import OWNER_ENV, _orphans, mark_children, process_alive
 
 
@@ -34,26 +34,4 @@ def test_runs_share_one_server_that_stops_when_idle(
     assert not process_alive(pid)  # stopped after the idle time
     assert not (home / "server.json").exists()
     assert (home / "prefect.db").exists()  # the run history stays
-    os.environ.pop(OWNER_ENV, None)
-
-
-def test_a_server_started_early_is_the_one_the_run_uses(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    home = tmp_path / "prefect"
-    monkeypatch.delenv("PREFECT_API_URL", raising=False)
-    monkeypatch.setenv(IDLE_ENV, "4")
-    mark_children()
-    start_shared_server(home)  # returns at once
-    early = json.loads((home / "server.starting").read_text())["pid"]
-    assert not (home / "server.json").exists()  # still starting
-    start_shared_server(home)  # a second call while it starts starts no second one
-    assert json.loads((home / "server.starting").read_text())["pid"] == early
-    with shared_server(home) as (url, _):
-        assert json.loads((home / "server.json").read_text())["pid"] == early
-        assert url.startswith("http://127.0.0.1:")
-    deadline = time.time() + 60
-    while process_alive(early) and time.time() < deadline:
-        time.sleep(0.5)
-    assert not process_alive(early)  # stopped after the idle time, as any shared server
     os.environ.pop(OWNER_ENV, None)
