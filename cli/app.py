@@ -196,10 +196,11 @@ def _executor(
 def _prepare(dag: Pipeline, cfg: PipelineConfig) -> None:
     """Make what the pipeline needs before it can be planned (the demo dataset), saying so."""
     if dag.prepare is not None:
+        t0 = time.perf_counter()
         with rich_progress(console) as progress:
             made = dag.prepare(cfg, progress)
         if made:
-            console.print(f"generated {made}")
+            console.print(f"generated {made} in {time.perf_counter() - t0:.1f} s")
 
 
 def _quarantine(store: StageStore, entries: list[PlanEntry]) -> None:

@@ -17,9 +17,13 @@ crash never leaves a half dataset that looks complete)::
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import shutil
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -73,10 +77,14 @@ def write_stereo_calibration(path: Path, rig: CameraRig, fps: float) -> None:
     fs.release()
 
 
-def _write_png(path: Path, image: np.ndarray) -> None:
+def _write_png(image: np.ndarray, *paths: Path) -> None:
+    """Encode an RGB (H, W, 3) or single-channel (H, W) image once and write it to ``paths``."""
     img = cv2.cvtColor(image, cv2.COLOR_RGB2BGR) if image.ndim == 3 else image
-    if not cv2.imwrite(str(path), img):
-        raise OSError(f"{path}: cannot write image")
+    ok, png = cv2.imencode(".png", img)
+    if not ok:
+        raise OSError(f"{paths[0]}: cannot encode the image as PNG")
+    for path in paths:
+        path.write_bytes(png.tobytes())
 
 
 def generate_demo(
@@ -87,11 +95,13 @@ def generate_demo(
     fps: float | None = None,
     params: DemoParams | None = None,
     progress: Callable[[int, int], None] | None = None,
+    workers: int | None = None,
 ) -> Path:
     """Generate the demo dataset into ``out_dir`` (replacing it) and return ``out_dir``.
 
     ``seed``, ``n_frames``, ``fps`` override the same fields of ``params`` (defaults:
-    ``DemoParams()``: seed 0, 90 frames at 30 fps). Deterministic for given parameters.
+    ``DemoParams()``: seed 0, 90 frames at 30 fps). Deterministic for given parameters, and
+    the same for any number of ``workers`` (processes rendering frames; default one per core).
     """
     p = params or DemoParams()
     overrides = {"seed": seed, "n_frames": n_frames, "fps": fps}
@@ -104,7 +114,7 @@ def generate_demo(
     (tmp / "stereo" / "left").mkdir(parents=True)
     (tmp / "stereo" / "right").mkdir()
     try:
-        _generate_into(tmp, p, progress)
+        _generate_into(tmp, p, progress, workers or default_workers())
         old = out_dir.parent / f".{out_dir.name}.old-{os.getpid()}"
         if out_dir.exists():
             out_dir.rename(old)
@@ -116,7 +126,93 @@ def generate_demo(
     return out_dir
 
 
-def _generate_into(root: Path, p: DemoParams, progress: Callable[[int, int], None] | None) -> None:
+@dataclass(frozen=True)
+class _Scene:
+    """What rendering one frame needs (sent once to each worker process)."""
+
+    v0: np.ndarray
+    faces: np.ndarray
+    m0: np.ndarray
+    field: AnalyticFaceField
+    expression: np.ndarray
+    head: np.ndarray
+    rig: CameraRig
+    texture: SkinTexture
+    p: DemoParams
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """One rendered frame: uint8 ``color`` / ``color_right`` (H, W, 3), uint16 sensor
+    ``depth`` (H, W), float32 ``vertices`` (N, 3) m (actor frame) and ``depth_true`` (H, W) m."""
+
+    color: np.ndarray
+    color_right: np.ndarray
+    depth: np.ndarray
+    vertices: np.ndarray
+    depth_true: np.ndarray
+
+
+def _render_frame(scene: _Scene, t: int) -> _Frame:
+    """Frame ``t``: colour and depth of the colour camera, the right stereo image, truth.
+    Depends on ``t`` only through its own seed, so frames can be rendered in any order."""
+    p, rig = scene.p, scene.rig
+    va = scene.v0 + scene.field.displacement(scene.v0, scene.expression[t])
+    vw = va @ scene.head[t, :3, :3].T + scene.head[t, :3, 3]
+    view_kw = dict(marker_radius=p.marker_radius_m, light_cam=LIGHT_CAM, supersample=p.supersample)
+    args = (scene.v0, scene.faces, rig.K, rig.size, scene.texture, scene.m0)
+    left = render_view(to_camera(vw, rig.pose_left), *args, **view_kw)
+    right = render_view(to_camera(vw, rig.pose_right), *args, with_depth=False, **view_kw)
+    rng = np.random.default_rng([p.seed, t])
+    color = color_to_uint8(left.color, rng, p.color_noise)
+    color_r = color_to_uint8(right.color, rng, p.color_noise)
+    depth = depth_sensor(
+        left,
+        rng,
+        depth_unit_m=p.depth_unit_m,
+        sigma_at_0_5m=p.depth_noise_m,
+        min_cos_view=p.min_cos_view,
+    )
+    return _Frame(color, color_r, depth, va.astype(np.float32), left.depth.astype(np.float32))
+
+
+_WORKER_SCENE: _Scene | None = None
+
+
+def _init_worker(scene: _Scene) -> None:
+    global _WORKER_SCENE
+    _WORKER_SCENE = scene
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)  # one process per core; no BLAS threads on top
+
+
+def _worker_frame(t: int) -> _Frame:
+    assert _WORKER_SCENE is not None
+    return _render_frame(_WORKER_SCENE, t)
+
+
+def _rendered_frames(scene: _Scene, workers: int) -> Iterator[_Frame]:
+    """Frames 0..T-1 in order, rendered by ``workers`` processes (1: in this process)."""
+    n = scene.p.n_frames
+    if workers <= 1 or n < 2:
+        yield from (_render_frame(scene, t) for t in range(n))
+        return
+    # fork: the workers inherit the imported modules (a fresh interpreter would spend
+    # seconds importing open3d); they only run numpy/scipy on their own arrays
+    ctx = multiprocessing.get_context("fork" if sys.platform == "linux" else "spawn")
+    with ProcessPoolExecutor(workers, ctx, initializer=_init_worker, initargs=(scene,)) as pool:
+        yield from pool.map(_worker_frame, range(n))
+
+
+def default_workers() -> int:
+    """Processes that render demo frames: one per core this process may use."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def _generate_into(
+    root: Path, p: DemoParams, progress: Callable[[int, int], None] | None, workers: int
+) -> None:
     actor = build_actor()
     v0, faces = actor.vertices, actor.faces
     markers = place_markers(v0, faces)
@@ -126,7 +222,7 @@ def _generate_into(root: Path, p: DemoParams, progress: Callable[[int, int], Non
     perf = demo_performance(p.n_frames, p.fps, p.seed)
     head = perf.head_pose()
     rig = realsense_like_rig(distance_m=p.camera_distance_m, baseline_m=p.stereo_baseline_m)
-    texture = SkinTexture.random(p.seed)
+    scene = _Scene(v0, faces, m0, field, perf.params, head, rig, SkinTexture.random(p.seed), p)
     h, w = rig.size
     T, N, K = p.n_frames, len(v0), len(markers.names)
 
@@ -141,45 +237,18 @@ def _generate_into(root: Path, p: DemoParams, progress: Callable[[int, int], Non
         name: gt.create_array(name, shape=shape, chunks=chunks, dtype="float32", fill_value=np.nan)
         for name, (shape, chunks) in arrays.items()
     }
-    view_kw = dict(marker_radius=p.marker_radius_m, light_cam=LIGHT_CAM, supersample=p.supersample)
     with RealSenseBagWriter(
         root / "capture.bag", rig.K, rig.size, fps=p.fps, depth_scale=p.depth_unit_m
     ) as bag:
-        for t in range(T):
-            va = v0 + field.displacement(v0, perf.params[t])
-            vw = va @ head[t, :3, :3].T + head[t, :3, 3]
-            left = render_view(
-                to_camera(vw, rig.pose_left), v0, faces, rig.K, rig.size, texture, m0, **view_kw
-            )
-            right = render_view(
-                to_camera(vw, rig.pose_right),
-                v0,
-                faces,
-                rig.K,
-                rig.size,
-                texture,
-                m0,
-                with_depth=False,
-                **view_kw,
-            )
-            rng = np.random.default_rng([p.seed, t])
-            color = color_to_uint8(left.color, rng, p.color_noise)
-            color_r = color_to_uint8(right.color, rng, p.color_noise)
-            depth = depth_sensor(
-                left,
-                rng,
-                depth_unit_m=p.depth_unit_m,
-                sigma_at_0_5m=p.depth_noise_m,
-                min_cos_view=p.min_cos_view,
-            )
+        for t, frame in enumerate(_rendered_frames(scene, workers)):
             name = f"{t:06d}.png"
-            _write_png(root / "rgbd" / "color" / name, color)
-            _write_png(root / "rgbd" / "depth" / name, depth)
-            _write_png(root / "stereo" / "left" / name, color)
-            _write_png(root / "stereo" / "right" / name, color_r)
-            bag.add_frame(color, depth, perf.times[t])
-            gt_arr["vertices_actor"][t] = va.astype(np.float32)
-            gt_arr["depth_true"][t] = left.depth.astype(np.float32)
+            # the stereo pair's left camera is the colour camera: the same image in both
+            _write_png(frame.color, root / "rgbd" / "color" / name, root / "stereo" / "left" / name)
+            _write_png(frame.depth, root / "rgbd" / "depth" / name)
+            _write_png(frame.color_right, root / "stereo" / "right" / name)
+            bag.add_frame(frame.color, frame.depth, perf.times[t])
+            gt_arr["vertices_actor"][t] = frame.vertices
+            gt_arr["depth_true"][t] = frame.depth_true
             if progress is not None:
                 progress(t + 1, T)
 

@@ -58,7 +58,8 @@ def paint_markers(
 ) -> np.ndarray:
     """Blend ``MARKER_RGB`` dots of ``radius`` m (0.3 mm soft edge) centred at neutral
     ``markers`` (K, 3) m into ``albedo`` (P, 3) at neutral ``points`` (P, 3) m."""
-    dist, _ = cKDTree(markers).query(points)
+    # points farther than the soft edge get dist = inf, weight 0 (the search stops early)
+    dist, _ = cKDTree(markers).query(points, distance_upper_bound=radius + 3e-4)
     w = np.clip((radius - dist) / 3e-4 + 0.5, 0.0, 1.0)[:, None]
     return (1.0 - w) * albedo + w * MARKER_RGB
 

@@ -54,12 +54,15 @@ def subject_distance(depth: np.ndarray) -> float:
 def rough_fraction(depth: np.ndarray) -> np.ndarray:
     """Per frame (T,): fraction of horizontally adjacent valid pixel pairs of depth (T, H, W)
     m whose depths differ by more than 10 % (0 where a frame has no such pair)."""
-    a, b = depth[:, :, 1:], depth[:, :, :-1]
-    with np.errstate(invalid="ignore"):
+    n = np.zeros(len(depth), dtype=np.int64)
+    jumps = np.zeros(len(depth), dtype=np.int64)
+    for t, frame in enumerate(depth):  # one frame at a time: temporaries stay in cache
+        a, b = frame[:, 1:], frame[:, :-1]
         ok = np.isfinite(a) & np.isfinite(b)
-        jump = ok & (np.abs(a - b) > 0.1 * np.minimum(a, b))
-    n = ok.sum(axis=(1, 2))
-    return np.where(n > 0, jump.sum(axis=(1, 2)) / np.maximum(n, 1), 0.0)
+        a, b = a[ok], b[ok]
+        n[t] = len(a)
+        jumps[t] = np.count_nonzero(np.abs(a - b) > 0.1 * np.minimum(a, b))
+    return np.where(n > 0, jumps / np.maximum(n, 1), 0.0)
 
 
 def _spikes(values: np.ndarray, jump: float, relative: bool) -> np.ndarray:
