@@ -45,7 +45,7 @@ def edit(nudge: int, extra: list[str]) -> tuple[float, dict[str, float]]:
     wall = time.perf_counter() - t0
     if done.returncode != 0:
         raise SystemExit(f"edit failed ({done.returncode}):\n{done.stdout[-2000:]}{done.stderr}")
-    ran = dict(re.findall(r"^(\w+): ran in ([\d.]+) s", done.stdout, re.M))
+    ran = dict(re.findall(r"^(\w+): ran in ([\d.]+) s", done.stdout + done.stderr, re.M))
     return wall, {s: float(ran[s]) for s in STAGES if s in ran}
 
 
