@@ -92,8 +92,7 @@ class FrameStepper:
     and optional spring ``force``. ``estimate``: 'acceleration' or 'doubling' (module
     docstring). Counts per run: ``substeps`` (T,) substeps that led to each frame,
     ``check_steps`` (steps computed and discarded), ``over`` (frames whose error stayed above
-    the tolerance at the smallest step allowed), ``errors`` (T,) estimated error of each
-    frame, m."""
+    the tolerance at the smallest step allowed)."""
 
     def __init__(
         self,
@@ -108,7 +107,6 @@ class FrameStepper:
         self.tol, self.estimate = error_tol_m, estimate
         self.level = 0
         self.substeps = np.zeros(bc.n_frames, dtype=np.int64)
-        self.errors = np.zeros(bc.n_frames)
         self.check_steps = 0
         self.over = 0
 
@@ -152,10 +150,12 @@ class FrameStepper:
             self.substeps[k] = self.levels[0]
             return self.advance(state, k, self.levels[0])[0]
         saved = (state.d.copy(), state.v.copy(), state.a.copy())
-        run = self._doubled if self.estimate == "doubling" else self._estimated
-        last = len(self.levels) - (2 if self.estimate == "doubling" else 1)
+        doubling = self.estimate == "doubling"
+        last = len(self.levels) - (2 if doubling else 1)
         while True:
-            heat, error, n_sub, discarded = run(state, k, saved)
+            heat, error, n_sub, discarded = (
+                self._doubled(state, k, saved) if doubling else self._estimated(state, k)
+            )
             if error <= self.tol or self.level == last:
                 self.over += error > self.tol
                 break
@@ -167,11 +167,11 @@ class FrameStepper:
             coarser = n_sub * self.levels[self.level - 1] // self.levels[self.level]
             if error * (n_sub / coarser) ** 2 < self.tol / 2:
                 self.level -= 1
-        self.substeps[k], self.errors[k] = n_sub, error
+        self.substeps[k] = n_sub
         self.check_steps += discarded
         return heat
 
-    def _estimated(self, state: State, k: int, saved) -> tuple[float, float, int, int]:
+    def _estimated(self, state: State, k: int) -> tuple[float, float, int, int]:
         """The frame in the current level's substeps with the Zienkiewicz-Xie estimate of
         its substeps' summed local errors (one more solve): (heat J, error m, substeps,
         steps discarded)."""
@@ -182,7 +182,9 @@ class FrameStepper:
         error = integ.local_error(state.a[integ.free] - a_start, defect)
         return heat, float(np.abs(error).max()), n_sub, 0
 
-    def _doubled(self, state: State, k: int, saved) -> tuple[float, float, int, int]:
+    def _doubled(
+        self, state: State, k: int, saved: tuple[np.ndarray, ...]
+    ) -> tuple[float, float, int, int]:
         """The frame in n and 2n substeps from the same state, the finer kept, with its
         Richardson estimate: (heat J, error m, substeps kept, steps discarded)."""
         coarse, fine = self.levels[self.level], self.levels[self.level + 1]
