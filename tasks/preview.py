@@ -6,7 +6,7 @@ default the uniform model) gives a POD basis (its displacement snapshots plus th
 sensitivities to each region's stiffness and viscosity, ``physanim.fem.reduced``), and every
 material variant is previewed in that basis in seconds.
 
-The basis lives in ``<run dir>/cache/reduced-basis/<key>.npz``, keyed by everything it
+The basis lives in ``<run dir>/cache/reduced-basis/`` (a ``FileCache``), keyed by everything it
 depends on: the simulate code version and full-run params, the reduced settings, the track,
 align and tetra keys and the variant's region labels. The basis run is the store's own
 ``simulate`` output for the basis material when there is one; otherwise it is computed once
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import fcntl
 import hashlib
-import os
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -156,25 +155,20 @@ def load_or_build_basis(
     basis material's own preview ``basis_error_peak``/``_rms``, ``basis_run``, ``seconds``)
     from the cache, built under a lock when missing or unreadable; the ``KEEP`` most recently
     used bases stay."""
+    from physanim.store.file_cache import FileCache
+
     key = _key(ctx, materials)
-    folder = ctx.dataset.run_dir / "cache" / "reduced-basis"
-    path = folder / f"{key}.npz"
-    with _locked(folder / f"{key}.lock"):
-        out = _read(path)
+    cache = FileCache(ctx.dataset.run_dir / "cache" / "reduced-basis", keep=KEEP)
+    with _locked(cache.folder / f".{key[:32]}.lock"):  # hidden: the cache does not count it
+        found = cache.fetch(key, ".npz")
+        out = None if found is None else _read(found)
         cached = out is not None
         if out is None:
             t0 = time.perf_counter()
             built = _build(ctx, args, materials)
             built["seconds"] = np.float64(time.perf_counter() - t0)
-            partial = folder / f"{key}.partial.npz"  # renamed into place: never half-written
-            np.savez(partial, **built)
-            os.replace(partial, path)
+            cache.put(key, ".npz", lambda path: np.savez(path, **built))
             out = built
-        path.touch()
-    done = [p for p in folder.glob("*.npz") if not p.name.endswith(".partial.npz")]
-    for old in sorted(done, key=lambda p: p.stat().st_mtime)[:-KEEP]:
-        old.unlink(missing_ok=True)
-        old.with_suffix(".lock").unlink(missing_ok=True)
     out["cached"], out["key"] = cached, key
     return out
 

@@ -8,7 +8,6 @@ part in the embedded surface exactly where the tissue is cut.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -81,8 +80,5 @@ def embedded_displacements(
         w = sp.csr_array(sp.load_npz(found))
     else:
         w = embedding_matrix(*args)
-        cache.folder.mkdir(parents=True, exist_ok=True)
-        tmp = cache.folder / f".embedding.{os.getpid()}.npz"
-        sp.save_npz(tmp, sp.csr_matrix(w))
-        cache.store(digest, tmp, move=True)
+        cache.put(digest, ".npz", lambda path: sp.save_npz(path, sp.csr_matrix(w)))
     return blend_frames(w, displacements)

@@ -3,7 +3,6 @@ code), so that a re-run whose meshes did not change does not render them again."
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
@@ -35,8 +34,5 @@ class TileCache:
             except (OSError, ValueError):
                 cached.unlink(missing_ok=True)
         tiles = face.render_sequence(**job)
-        self.files.folder.mkdir(parents=True, exist_ok=True)
-        tmp = self.files.folder / f".tiles.{os.getpid()}.npy"
-        np.save(tmp, tiles)
-        self.files.store(digest, tmp, move=True)
+        self.files.put(digest, ".npy", lambda path: np.save(path, tiles))
         return tiles

@@ -48,24 +48,21 @@ class FileCache:
         found.touch()
         return found
 
-    def store(self, digest: str, source: Path, move: bool = False) -> None:
-        """Keep ``source`` (a copy, or the file itself with ``move``, on the same disk) under
-        ``digest`` (written aside, then renamed, so a crash never leaves half a file); the
-        least recently used beyond ``keep`` go."""
-        target = self.path(digest, source.suffix)
+    def put(self, digest: str, suffix: str, write: Callable[[Path], Any]) -> Path:
+        """The file of ``digest``, written by ``write(path)`` aside and then renamed (a crash
+        never leaves half a file); the least recently used beyond ``keep`` go."""
+        target = self.path(digest, suffix)
         self.folder.mkdir(parents=True, exist_ok=True)
-        if move:
-            Path(source).replace(target)
-        else:
-            tmp = target.with_name(f".{target.stem}.{os.getpid()}{target.suffix}")
-            shutil.copyfile(source, tmp)
-            tmp.replace(target)
+        tmp = target.with_name(f".{target.stem}.{os.getpid()}{suffix}")
+        write(tmp)
+        tmp.replace(target)
         kept = sorted(
             (p for p in self.folder.iterdir() if p.is_file() and not p.name.startswith(".")),
             key=lambda p: p.stat().st_mtime,
         )
         for old in kept[: -self.keep]:
             old.unlink(missing_ok=True)
+        return target
 
     def make(self, out: Path, digest: str, producer: Callable[[Path], Any]) -> Path:
         """``out`` copied from the cache when ``digest`` is there, else made by
@@ -75,5 +72,5 @@ class FileCache:
             shutil.copyfile(cached, out)
             return out
         producer(out)
-        self.store(digest, out)
+        self.put(digest, out.suffix, lambda tmp: shutil.copyfile(out, tmp))
         return out
