@@ -173,15 +173,6 @@ def model_tiles(
         return {name: f.result() for name, f in futures.items()}
 
 
-def capture_panels(
-    footage: FaceFootage, frames: NDArray, tiles: dict[str, NDArray], size: tuple[int, int]
-) -> list[NDArray]:
-    """One panel per frame of ``frames`` (R,): the capture cropped to the face (the
-    landmarks' box + 60 %, with the aspect of a tile of ``size`` (W, H) px) with the tracked
-    landmarks, then the ``tiles`` (title -> (R, H, W, 3) uint8) under their titles."""
-    return compose_panels(footage, frames, capture_tiles(footage, frames, size), tiles)
-
-
 def capture_tiles(footage: FaceFootage, frames: NDArray, size: tuple[int, int]) -> list[NDArray]:
     """The capture at ``frames`` (R,) cropped to the face (the landmarks' box + 60 %, with the
     aspect of a tile of ``size`` (W, H) px) with the tracked landmarks drawn: R images."""

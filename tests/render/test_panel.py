@@ -99,12 +99,12 @@ def test_write_webm_vp8(tmp_path):
     assert n == 5
 
 
-def test_capture_panels_crop_the_face_and_write_every_frame(tmp_path):
+def test_panels_crop_the_face_and_write_every_frame(tmp_path):
     """The face panel's capture tile is the landmarks' box (+60 %, tile aspect) of every
     selected frame, read alike from numpy and Zarr; write_panels keeps one PNG per frame."""
     import zarr
 
-    from physanim.render.face_panel import FaceFootage, capture_panels, write_panels
+    from physanim.render.face_panel import FaceFootage, capture_tiles, compose_panels, write_panels
 
     colour = np.zeros((4, 240, 320, 3), np.uint8)
     colour[:, 100:140, 150:170] = 255  # a white face where the landmarks are
@@ -116,7 +116,8 @@ def test_capture_panels_crop_the_face_and_write_every_frame(tmp_path):
     panels = []
     for source in (colour, lazy):
         footage = FaceFootage(source, uv, np.ones((4, 2)), 10.0, *[None] * 9, np.zeros((4, 1, 3)))
-        panels.append(capture_panels(footage, frames, tiles, (120, 160)))
+        captured = capture_tiles(footage, frames, (120, 160))
+        panels.append(compose_panels(footage, frames, captured, tiles))
     assert len(panels[0]) == 2 and all((a == b).all() for a, b in zip(*panels, strict=True))
     # crop rows 88-152, cols 136-184 (half height 1.6 / 2 * 40 px, width 3/4 of it), scaled
     # to the tile's 160 rows: 120 columns, the white face in the middle, black beside it
