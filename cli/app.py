@@ -19,6 +19,7 @@ import sys
 import time
 import warnings
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Annotated
 
@@ -146,7 +147,7 @@ def run(
     t0 = time.perf_counter()
     dag, cfg = target.pipeline, target.config
     _tidy_up()
-    _prepare(dag, cfg)
+    _prepare(dag, cfg, None if local else partial(_start_prefect, cfg))
     store, entries = _plan(target, only, start, force, checksums=verify)
     for leftover in store.remove_stale_temporaries():
         console.print(f"removed abandoned partial output {leftover.name}")
@@ -193,12 +194,23 @@ def _executor(
     return PrefectExecutor(home, name=f"physanim-{dag.name}", progress=progress)
 
 
-def _prepare(dag: Pipeline, cfg: PipelineConfig) -> None:
-    """Make what the pipeline needs before it can be planned (the demo dataset), saying so."""
+def _start_prefect(cfg: PipelineConfig) -> None:
+    """Begin starting the run directory's shared Prefect server (it takes 10-25 s; the
+    executor waits for it later)."""
+    from flows.prefect_env import configure, start_shared_server
+
+    start_shared_server(configure(cfg.dataset.run_dir))
+
+
+def _prepare(
+    dag: Pipeline, cfg: PipelineConfig, starting: Callable[[], None] | None = None
+) -> None:
+    """Make what the pipeline needs before it can be planned (the demo dataset), saying so;
+    ``starting()`` runs first when there is something to make."""
     if dag.prepare is not None:
         t0 = time.perf_counter()
         with rich_progress(console) as progress:
-            made = dag.prepare(cfg, progress)
+            made = dag.prepare(cfg, progress, starting)
         if made:
             console.print(f"generated {made} in {time.perf_counter() - t0:.1f} s")
 

@@ -5,7 +5,8 @@ run directory keeps runs (and tests) away from the user's own Prefect profile.  
 ``PREFECT_API_URL`` every flow run would start a temporary local API server (SQLite), whose
 startup takes 10-25 s here; ``shared_server`` instead keeps one server per ``PREFECT_HOME``
 running between runs (same database, so the UI shows every run) and stops it after
-``PHYSANIM_PREFECT_IDLE_S`` seconds (default 600) without a run.
+``PHYSANIM_PREFECT_IDLE_S`` seconds (default 600) without a run. ``start_shared_server`` begins
+that start in the background, so that it overlaps other work (the demo's generation).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from physanim.processes import OWNER_ENV, mark_children, process_alive, start_ti
 
 #: Seconds a shared server waits for the next run before it stops (``shared_server``).
 IDLE_ENV = "PHYSANIM_PREFECT_IDLE_S"
-_STATE, _LEASE, _LOCK = "server.json", "server.lease", "server.lock"
+_STATE, _LEASE, _LOCK, _STARTING = "server.json", "server.lease", "server.lock", "server.starting"
 
 #: Settings applied unless the user already set them in the environment.
 DEFAULTS = {
@@ -123,16 +124,53 @@ def _running_shared(home: Path) -> str | None:
     return url if alive and _healthy(url) else None
 
 
+def _starting(home: Path) -> bool:
+    """True while a supervisor spawned for ``home`` runs (it may not answer yet)."""
+    try:
+        state = json.loads((home / _STARTING).read_text())
+        pid, started = int(state["pid"]), float(state["started"])
+    except (OSError, ValueError, KeyError):
+        return False
+    return process_alive(pid) and abs((start_time(pid) or started) - started) < 2.0
+
+
+def _spawn_supervisor(home: Path) -> None:
+    """Start ``python -m flows.prefect_env HOME`` detached (call with the home's lock held)."""
+    env = {k: v for k, v in os.environ.items() if k != OWNER_ENV}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "flows.prefect_env", str(home)],
+        env=env, cwd=Path(__file__).resolve().parents[1], start_new_session=True,
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    state = {"pid": proc.pid, "started": start_time(proc.pid) or time.time()}
+    (home / _STARTING).write_text(json.dumps(state))
+
+
+def start_shared_server(home: Path) -> None:
+    """Begin starting the shared server of ``home`` (see ``shared_server``) and return at
+    once; nothing when PREFECT_API_URL answers or the server runs or is starting already."""
+    existing = os.environ.get("PREFECT_API_URL")
+    if existing and _healthy(existing):
+        return
+    home = Path(home)
+    home.mkdir(parents=True, exist_ok=True)
+    with (home / _LOCK).open("a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        (home / _LEASE).touch()
+        if _running_shared(home) is None and not _starting(home):
+            _spawn_supervisor(home)
+
+
 @contextlib.contextmanager
 def shared_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple[str, bool]]:
     """Yield (API URL, started_now) of the Prefect server shared by the runs of ``home``.
 
     PREFECT_API_URL wins when it answers. Otherwise the server that an earlier run of this
-    home left running is reused, or one is started: ``python -m flows.prefect_env HOME`` (a
-    detached supervisor, not marked as this process's, so orphan clean-up leaves it alone)
-    runs ``prefect server start`` and stops it, and itself, once no run has used it for
-    PHYSANIM_PREFECT_IDLE_S seconds or when ``home`` is removed. While the caller runs, a
-    thread renews the lease every few seconds.
+    home left running (or ``start_shared_server`` began to start) is used, or one is started:
+    ``python -m flows.prefect_env HOME`` (a detached supervisor, not marked as this process's,
+    so orphan clean-up leaves it alone) runs ``prefect server start`` and stops it, and
+    itself, once no run has used it for PHYSANIM_PREFECT_IDLE_S seconds or when ``home`` is
+    removed. While the caller runs, a thread renews the lease every few seconds.
     """
     existing = os.environ.get("PREFECT_API_URL")
     if existing and _healthy(existing):
@@ -146,15 +184,11 @@ def shared_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple[
         lease.touch()
         url, started = _running_shared(home), False
         if url is None:
-            env = {k: v for k, v in os.environ.items() if k != OWNER_ENV}
-            subprocess.Popen(
-                [sys.executable, "-m", "flows.prefect_env", str(home)],
-                env=env, cwd=Path(__file__).resolve().parents[1], start_new_session=True,
-                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            )  # fmt: skip
+            if not _starting(home):
+                _spawn_supervisor(home)
             deadline = time.time() + startup_timeout
             while (url := _running_shared(home)) is None:
-                if time.time() > deadline:
+                if time.time() > deadline or not _starting(home):
                     raise RuntimeError(f"prefect server did not start; see {home / 'server.log'}")
                 time.sleep(0.25)
             started = True

@@ -6,7 +6,7 @@ need them, so that planning (``physanim status``) never pays for open3d, VTK or 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -94,8 +94,13 @@ SPEC = StageSpec.typed(
 )
 
 
-def ensure_demo(config: PipelineConfig, progress: ProgressFactory | None = None) -> Path | None:
-    """Generate the demo dataset when the config names ``demo`` and it has no recording yet.
+def ensure_demo(
+    config: PipelineConfig,
+    progress: ProgressFactory | None = None,
+    starting: Callable[[], None] | None = None,
+) -> Path | None:
+    """Generate the demo dataset when the config names ``demo`` and it has no recording yet;
+    ``starting`` is called first (the CLI starts Prefect's server then, to come up meanwhile).
 
     Returns the generated directory, or None when nothing had to be done.
     """
@@ -107,6 +112,8 @@ def ensure_demo(config: PipelineConfig, progress: ProgressFactory | None = None)
     from physanim.capture.demo import generate_demo  # open3d: only when generating
     from physanim.capture.params import DemoParams
 
+    if starting is not None:
+        starting()
     report = progress("demo dataset") if progress else None
     demo = config.section("demo", DemoParams)
     return generate_demo(dataset.path, params=demo, progress=report)

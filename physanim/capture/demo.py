@@ -97,7 +97,8 @@ def generate_demo(
     progress: Callable[[int, int], None] | None = None,
     workers: int | None = None,
 ) -> Path:
-    """Generate the demo dataset into ``out_dir`` (replacing it) and return ``out_dir``.
+    """Generate the demo dataset into ``out_dir`` and return ``out_dir``: the recording and
+    its truth replace those already there; other entries (``runs/``) stay.
 
     ``seed``, ``n_frames``, ``fps`` override the same fields of ``params`` (defaults:
     ``DemoParams()``: seed 0, 90 frames at 30 fps). Deterministic for given parameters, and
@@ -115,15 +116,36 @@ def generate_demo(
     (tmp / "stereo" / "right").mkdir()
     try:
         _generate_into(tmp, p, progress, workers or default_workers())
-        old = out_dir.parent / f".{out_dir.name}.old-{os.getpid()}"
-        if out_dir.exists():
-            out_dir.rename(old)
-        tmp.rename(out_dir)
-        shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
+        _move_into(tmp, out_dir)
+    finally:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out_dir
+
+
+#: The recordings ``generate_demo`` writes, moved into place last (a dataset counts as
+#: recorded once one is there), the bag, which ingest prefers, last of all.
+_RECORDINGS = ("rgbd", "capture.bag")
+
+
+def _move_into(tmp: Path, out_dir: Path) -> None:
+    """Rename the entries of ``tmp`` into ``out_dir`` (made if missing), replacing same-named
+    ones and leaving the rest (the run directory, whose Prefect server may be starting
+    meanwhile)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    names = sorted(
+        (e.name for e in tmp.iterdir()),
+        key=lambda n: _RECORDINGS.index(n) if n in _RECORDINGS else -1,
+    )
+    old = out_dir.parent / f".{out_dir.name}.old-{os.getpid()}"
+    shutil.rmtree(old, ignore_errors=True)
+    old.mkdir()
+    try:
+        for name in names:
+            if (out_dir / name).exists():
+                (out_dir / name).rename(old / name)
+            (tmp / name).rename(out_dir / name)
+    finally:
+        shutil.rmtree(old, ignore_errors=True)
 
 
 @dataclass(frozen=True)

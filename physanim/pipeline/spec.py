@@ -176,8 +176,9 @@ class Pipeline:
     stages: tuple[StageSpec, ...]
     default_config: Path
     extra_sections: Mapping[str, type[BaseModel]] = field(default_factory=dict)
-    #: called by ``run`` before planning, e.g. to generate a missing demo dataset
-    prepare: Callable[[PipelineConfig, Any], Any] | None = None
+    #: called by ``run`` before planning, e.g. to generate a missing demo dataset:
+    #: (config, progress, starting) with ``starting()`` called when there is work to do
+    prepare: Callable[..., Any] | None = None
     #: called by ``run`` after the stages, (store, plan entries, config) -> report path | None
     report: Callable[[Any, Any, PipelineConfig], Path | None] | None = None
 

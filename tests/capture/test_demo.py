@@ -115,3 +115,18 @@ def test_frames_rendered_in_parallel_match_serial(tmp_path: Path) -> None:
     b = zarr.open_group(parallel / "ground_truth.zarr", mode="r")
     for name in ("vertices_actor", "depth_true"):
         np.testing.assert_array_equal(a[name][:], b[name][:], err_msg=name)
+
+
+def test_regenerating_replaces_the_recording_and_keeps_the_run_directory(tmp_path: Path) -> None:
+    from physanim.capture.demo import generate_demo
+
+    out = tmp_path / "demo"
+    (out / "runs" / "prefect").mkdir(parents=True)
+    (out / "runs" / "prefect" / "prefect.db").write_bytes(b"history")
+    (out / "capture.bag").write_bytes(b"an older recording")
+    generate_demo(out, n_frames=2, workers=1)
+    assert (out / "runs" / "prefect" / "prefect.db").read_bytes() == b"history"
+    assert (out / "capture.bag").stat().st_size > 1000
+    frames = zarr.open_group(out / "ground_truth.zarr", mode="r")["vertices_actor"]
+    assert frames.shape[0] == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo"]  # no partial or old left

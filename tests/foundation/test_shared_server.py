@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from flows.prefect_env import IDLE_ENV, shared_server
+from flows.prefect_env import IDLE_ENV, shared_server, start_shared_server
 from physanim.processes import OWNER_ENV, _orphans, mark_children, process_alive
 
 
@@ -20,9 +20,14 @@ def test_runs_share_one_server_that_stops_when_idle(
     monkeypatch.delenv("PREFECT_API_URL", raising=False)
     monkeypatch.setenv(IDLE_ENV, "4")
     mark_children()  # as the CLI does: the server must not count as this process's child
+    start_shared_server(home)  # as a run does before it generates the demo: returns at once
+    starting = json.loads((home / "server.starting").read_text())["pid"]
+    start_shared_server(home)  # no second server while the first one starts
+    assert json.loads((home / "server.starting").read_text())["pid"] == starting
     with shared_server(home) as (url, started):
         assert started
         pid = json.loads((home / "server.json").read_text())["pid"]
+        assert pid == starting  # the run waited for the server started before it
         assert OWNER_ENV not in Path(f"/proc/{pid}/environ").read_text()
         time.sleep(6)  # longer than the idle time: the open run's lease keeps it alive
         with shared_server(home) as (again, started_again):
