@@ -172,11 +172,15 @@ class Newmark:
         that the end points miss) acts through the inertial and viscous coupling
         (4/h^2) M_uc + (2/h) C_uc; through K_uc the free DOFs follow the exact end points.
         """
+        return self.solve(self.local_error_rhs(delta_a, defect_c))
+
+    def local_error_rhs(self, delta_a: np.ndarray, defect_c: np.ndarray) -> np.ndarray:
+        """The right-hand side (n_free,) whose solve is ``local_error``."""
         x, n, c, h = np.zeros_like(self._x), self.K.shape[0], self.prescribed, self.dt
         x[self.free] = -delta_a / 3.0
         x[c] = (4.0 / h**2) * defect_c
         x[n + c] = (2.0 / h) * defect_c
-        return self.solve(self._H @ x)
+        return self._H @ x
 
     def step(
         self,
@@ -187,12 +191,30 @@ class Newmark:
         f_u: np.ndarray | None = None,
     ) -> State:
         """Advance ``state`` (in place) by dt with prescribed d_c, v_c, a_c (n_c,) at t + dt."""
-        x, dt = self._x, self.dt
-        _pack_rhs(state.d, state.v, state.a, self.free, self.prescribed, d_c, v_c, a_c, dt, x)
+        d_u = self.solve(self.step_rhs(state, d_c, v_c, a_c, f_u))
+        return self.finish_step(state, d_u, d_c, v_c, a_c)
+
+    def step_rhs(
+        self,
+        state: State,
+        d_c: np.ndarray,
+        v_c: np.ndarray,
+        a_c: np.ndarray,
+        f_u: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """The right-hand side (n_free,) of ``step`` from ``state`` (not modified)."""
+        x = self._x
+        _pack_rhs(state.d, state.v, state.a, self.free, self.prescribed, d_c, v_c, a_c, self.dt, x)
         rhs = self._H @ x
         if f_u is not None:
             rhs += f_u
-        _advance(state.d, state.v, state.a, self.free, self.solve(rhs), dt)
+        return rhs
+
+    def finish_step(
+        self, state: State, d_u: np.ndarray, d_c: np.ndarray, v_c: np.ndarray, a_c: np.ndarray
+    ) -> State:
+        """``step``'s update of ``state`` (in place) given its solve d_u (n_free,) m."""
+        _advance(state.d, state.v, state.a, self.free, d_u, self.dt)
         state.d[self.prescribed], state.v[self.prescribed] = d_c, v_c
         state.a[self.prescribed] = a_c
         return state

@@ -417,13 +417,11 @@ class ParallelLDL:
         boff = np.r_[0, np.cumsum(m * widths)]
         toff = np.r_[0, np.cumsum(widths * widths)]
         self.rows = np.zeros(roff[-1], np.uint32)  # unsigned: no wraparound check on loads
-        self.vals = np.zeros(boff[-1])
-        self.tri = np.zeros(toff[-1])
+        self.vals = np.zeros(boff[-1], self.dtype)
+        self.tri = np.zeros(toff[-1], self.dtype)
         _pack_blocks(indptr, indices, Ls.data, starts, widths, roff, boff, toff, self.rows,
                      self.vals, self.tri)  # fmt: skip
         self._packing = (indptr, indices, starts, widths, roff, boff, toff)
-        self.vals = self.vals.astype(self.dtype, copy=False)
-        self.tri = self.tri.astype(self.dtype, copy=False)
         u64 = lambda a: np.asarray(a, np.uint64)  # noqa: E731
         self.starts, self.widths = u64(starts), u64(widths)
         self.roff, self.boff, self.toff = u64(roff), u64(boff), u64(toff)
@@ -523,10 +521,13 @@ class ParallelLDL:
             raise ValueError("refilled: L must have the CSC pattern of the original factor")
         out = copy.copy(self)
         out.dinv = 1.0 / d
-        vals, tri = np.zeros(self.vals.size), np.zeros(self.tri.size)
+        out.vals, out.tri = (
+            np.zeros(self.vals.size, self.dtype),
+            np.zeros(self.tri.size, self.dtype),
+        )
         rows = np.zeros(self.rows.size, np.uint32)
-        _pack_blocks(indptr, indices, Ls.data, starts, widths, roff, boff, toff, rows, vals, tri)
-        out.vals, out.tri = vals.astype(self.dtype), tri.astype(self.dtype)
+        _pack_blocks(indptr, indices, Ls.data, starts, widths, roff, boff, toff, rows, out.vals,
+                     out.tri)  # fmt: skip
         return out
 
     def _work_arrays(self, k: int) -> tuple[np.ndarray, ...]:

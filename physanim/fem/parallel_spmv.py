@@ -88,9 +88,12 @@ class ParallelCSR:
         self.indptr, self.indices, self.data, self.bounds = _csr_arrays(A, n_threads)
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
-        """A @ x for x (m,) float64; returns (n,)."""
+        """A @ x for x (m,) or (m, k) float64; returns (n,) or (n, k)."""
+        x = np.asarray(x, np.float64)
+        if x.ndim == 2:
+            return np.column_stack([self @ x[:, j] for j in range(x.shape[1])])
         out = np.empty(self.shape[0])
-        _matvec(self.indptr, self.indices, self.data, np.asarray(x, np.float64), self.bounds, out)
+        _matvec(self.indptr, self.indices, self.data, np.ascontiguousarray(x), self.bounds, out)
         return out
 
 

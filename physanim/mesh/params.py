@@ -136,7 +136,12 @@ class TetraParams(BaseModel):
         "(dimensionless; 3 = all regular).",
     )
     max_opt_iterations: int = Field(
-        30, ge=1, le=200, description="fTetWild optimisation passes at most (count)."
+        4,
+        ge=1,
+        le=200,
+        description="fTetWild optimisation passes at most (count). On the demo most runs meet "
+        "stop_energy after 1-2 passes of 5-8 s each; a few kept going for 10 passes or more "
+        "(fTetWild is not deterministic), which made tetra take from 20 s to 3 min.",
     )
     sliver_dihedral_deg: float = Field(
         5.0, gt=0.0, lt=60.0, description="Tets with a dihedral angle below this are slivers, deg."

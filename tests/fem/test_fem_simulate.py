@@ -79,7 +79,12 @@ def test_driven_nodes_follow_and_fixed_nodes_stay():
 
 @pytest.mark.parametrize(
     ("estimate", "precision"),
-    [("acceleration", "float64"), ("doubling", "float64"), ("acceleration", "mixed")],
+    [
+        ("acceleration", "float32"),
+        ("acceleration", "float64"),
+        ("doubling", "float64"),
+        ("acceleration", "mixed"),
+    ],
 )
 def test_adaptive_steps_match_the_fine_fixed_reference(estimate, precision):
     # a fast jerk (1 mm in two frames) then a hold: the control refines the jerk only. The
