@@ -89,7 +89,8 @@ class Newmark:
         u = self.free
         sub = lambda X: X[u][:, u]  # noqa: E731
         # A_uu(dt) = K_uu + (4/dt^2) M_uu + (2/dt) C_uu: values on one pattern, combined per dt
-        self._pattern, self._kmc = _common_pattern(sub(self.K), sub(self.M), sub(self.C))
+        self._M_uu = sub(self.M)  # on its own pattern: initial accelerations
+        self._pattern, self._kmc = _common_pattern(sub(self.K), self._M_uu, sub(self.C))
         self._split = None
         if split is not None and self.solver == "cholmod" and not optimized_blas():
             K_el, G, w = split
@@ -147,7 +148,7 @@ class Newmark:
         )
         if f is not None:
             r += f
-        state.a[u] = _solve_mass(self._pattern_part(1), r[u])
+        state.a[u] = _solve_mass(self._M_uu, r[u])
         return state.a
 
     def dissipation(self, delta: np.ndarray) -> float:
@@ -246,22 +247,25 @@ def _advance(d, v, a, u, d_u, dt):
         d[i] = d_u[k]
 
 
-def _common_pattern(*mats: sp.spmatrix) -> tuple[sp.csc_matrix, list[np.ndarray]]:
-    """The union sparsity pattern (CSC, sorted) of square matrices and each one's values on
-    it, so that linear combinations of them are sums of value arrays."""
-    pattern = sp.csc_matrix(sum(abs(sp.csc_matrix(X)) for X in mats))
-    pattern.sort_indices()
-    n = pattern.shape[0]
-    cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr))
-    keys = cols * n + pattern.indices  # column-major, so sorted
+def _common_pattern(*mats: sp.csr_matrix) -> tuple[sp.csc_matrix, list[np.ndarray]]:
+    """The union sparsity pattern (CSC, sorted) of symmetric square CSR matrices and each
+    one's values on it, so that linear combinations of them are sums of value arrays.
+
+    A symmetric matrix's CSR arrays are its CSC arrays (of its transpose, which it equals):
+    the pattern is read that way instead of converted (about 0.15 s on the demo)."""
+    union = sum(abs(X) for X in mats)
+    union.sort_indices()
+    n = union.shape[0]
+    keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(union.indptr)) * n + union.indices
     values = []
     for X in mats:  # each entry's slot in the pattern by its key (a binary search)
-        X = sp.csc_matrix(X, copy=True)
+        X = X.copy()
         X.sum_duplicates()
-        x_cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(X.indptr))
-        v = np.zeros(pattern.nnz)
-        v[np.searchsorted(keys, x_cols * n + X.indices)] = X.data
+        x_rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(X.indptr))
+        v = np.zeros(union.nnz)
+        v[np.searchsorted(keys, x_rows * n + X.indices)] = X.data
         values.append(v)
+    pattern = sp.csc_matrix((union.data, union.indices, union.indptr), shape=union.shape)
     return pattern, values
 
 
@@ -276,7 +280,7 @@ def _refined(solve: Solve, A: ParallelCSR) -> Solve:
     return refined
 
 
-def _solve_mass(M: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
+def _solve_mass(M: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
     """M^-1 b for a mass matrix (SPD, condition number O(10) after diagonal scaling) by
     Jacobi-preconditioned conjugate gradients to round-off, instead of a factorisation.
     numpy's BLAS stays on one thread: right after numba's parallel products its threads
