@@ -392,7 +392,7 @@ class ParallelLDL:
         self.dinv = 1.0 / d
         self.dtype = np.dtype(dtype)
         indptr = Ls.indptr.astype(np.int64, copy=False)
-        indices = Ls.indices.astype(np.int64, copy=False)
+        indices = Ls.indices  # as given (CHOLMOD's int32): an int64 copy is 8 bytes per entry
         self._pattern = (
             None
             if strict or not (sp.issparse(L) and L.format == "csc")
