@@ -518,15 +518,38 @@ def serve(
         # The deployment is served by a child process: Prefect's runner stops cleanly on
         # SIGINT, so SIGINT/SIGTERM here are forwarded to it as SIGINT; then the server stops.
         child = subprocess.Popen(args, env={**os.environ, "PREFECT_API_URL": url})
+        asked: list[float] = []  # when a stop was asked for
 
         def forward(_signum: int, _frame: object) -> None:
+            asked.append(time.monotonic())
             child.send_signal(signal.SIGINT)
 
         signal.signal(signal.SIGTERM, forward)
         signal.signal(signal.SIGINT, forward)
-        rc = child.wait()
+        rc = _wait_or_kill(child, asked)
     console.print(f"stopped (server {'stopped' if started else 'left running'})")
-    raise typer.Exit(0 if rc in (0, -signal.SIGINT, 130) else rc)
+    raise typer.Exit(0 if rc in (0, -signal.SIGINT, 130, -signal.SIGKILL) and asked else rc)
+
+
+#: Seconds ``serve`` gives Prefect's runner to stop after SIGINT before killing it.
+SERVE_STOP_GRACE_S = 20.0
+
+
+def _wait_or_kill(child: subprocess.Popen, asked: list[float]) -> int:
+    """The child's exit status; killed when it is still running ``SERVE_STOP_GRACE_S`` after
+    the first stop request in ``asked`` (Prefect's runner has hung in its shutdown when the
+    server's SQLite database stayed locked)."""
+    while True:
+        try:
+            return child.wait(timeout=1.0)
+        except subprocess.TimeoutExpired:
+            if asked and time.monotonic() - asked[0] > SERVE_STOP_GRACE_S:
+                console.print(
+                    f"the scheduler did not stop within {SERVE_STOP_GRACE_S:.0f} s of the "
+                    "signal; killed it"
+                )
+                child.kill()
+                return child.wait()
 
 
 def _is_io(exc: BaseException | None) -> bool:

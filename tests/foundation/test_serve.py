@@ -9,6 +9,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -39,7 +41,27 @@ def test_serve_processes_new_dataset_and_stops_on_signal(tmp_path: Path) -> None
         assert wait_for(second, 120), "the new dataset was not processed"
     finally:
         proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=120)
+        try:
+            out, _ = proc.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, _ = proc.communicate()
+            raise AssertionError(f"serve did not stop on SIGTERM:\n{out[-3000:]}") from None
     assert proc.returncode == 0, out[-3000:]
     assert "started Prefect server" in out and "stopped (server stopped)" in out
     assert (datasets / ".physanim" / "prefect").is_dir()  # Prefect home inside the folder
+
+
+def test_a_scheduler_that_ignores_the_stop_is_killed_after_the_grace_time(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from cli import app
+
+    monkeypatch.setattr(app, "SERVE_STOP_GRACE_S", 0.5)
+    code = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); time.sleep(60)"
+    child = subprocess.Popen([sys.executable, "-c", code])
+    time.sleep(0.5)  # its handler is installed
+    child.send_signal(signal.SIGINT)  # ignored, as a hung runner would
+    t0 = time.monotonic()
+    assert app._wait_or_kill(child, [t0]) == -signal.SIGKILL
+    assert time.monotonic() - t0 < 10
