@@ -158,11 +158,11 @@ class Newmark:
         """
         return self._dissipation_form(delta) / self.dt
 
-    def local_error(self, delta_a: np.ndarray, defect_c: np.ndarray) -> np.ndarray:
-        """Estimated displacement error (n_free,) m of steps over which the free DOFs'
-        accelerations changed by ``delta_a`` (n_free,) m/s^2 in all and the prescribed DOFs'
-        paths left the trapezoidal rule by ``defect_c`` (n_c,) m (``BoundaryConditions.
-        drive_defect``).
+    def local_error_rhs(self, delta_a: np.ndarray, defect_c: np.ndarray) -> np.ndarray:
+        """The right-hand side (n_free,) whose solve is the estimated displacement error
+        (n_free,) m of steps over which the free DOFs' accelerations changed by ``delta_a``
+        (n_free,) m/s^2 in all and the prescribed DOFs' paths left the trapezoidal rule by
+        ``defect_c`` (n_c,) m (``BoundaryConditions.drive_defect``).
 
         Zienkiewicz & Xie's estimate for Newmark, e = -(beta - 1/6) h^2 Delta a = -h^2/12
         Delta a, taken through this step's matrix as -(1/3) A_uu^-1 M_uu Delta a: the same for
@@ -173,10 +173,6 @@ class Newmark:
         that the end points miss) acts through the inertial and viscous coupling
         (4/h^2) M_uc + (2/h) C_uc; through K_uc the free DOFs follow the exact end points.
         """
-        return self.solve(self.local_error_rhs(delta_a, defect_c))
-
-    def local_error_rhs(self, delta_a: np.ndarray, defect_c: np.ndarray) -> np.ndarray:
-        """The right-hand side (n_free,) whose solve is ``local_error``."""
         x, n, c, h = np.zeros_like(self._x), self.K.shape[0], self.prescribed, self.dt
         x[self.free] = -delta_a / 3.0
         x[c] = (4.0 / h**2) * defect_c

@@ -6,7 +6,7 @@ displacement, either
 - 'acceleration' (default): Zienkiewicz & Xie's a posteriori estimate for Newmark,
   e = -(beta - 1/6) h^2 (a_{k+1} - a_k) = -h^2/12 Delta a per substep, summed over the frame
   (the accelerations' change over it), taken through the step's matrix and with the driven
-  nodes' path between the substeps (``Newmark.local_error``): one more solve per frame; or
+  nodes' path between the substeps (``Newmark.local_error_rhs``): one more solve per frame; or
 - 'doubling': the frame is computed from the same state in n and 2n substeps, the finer kept
   and its error estimated as |d_2n - d_n| / (r^2 - 1) (Richardson, second order).
 
