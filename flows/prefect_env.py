@@ -113,25 +113,28 @@ def _server_command(home: Path, port: int) -> tuple[list[str], dict[str, str]]:
     return cmd, env
 
 
+def _live_record(path: Path) -> dict | None:
+    """The JSON record ({"pid", "started", ...}) at ``path`` while the process it names still
+    runs (same pid and start time); None otherwise."""
+    try:
+        state = json.loads(path.read_text())
+        pid, started = int(state["pid"]), float(state["started"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    same = process_alive(pid) and abs((start_time(pid) or started) - started) < 2.0
+    return state if same else None
+
+
 def _running_shared(home: Path) -> str | None:
     """URL of the shared server of ``home`` when its supervisor runs and it answers."""
-    try:
-        state = json.loads((home / _STATE).read_text())
-        pid, started, url = int(state["pid"]), float(state["started"]), str(state["url"])
-    except (OSError, ValueError, KeyError):
-        return None
-    alive = process_alive(pid) and abs((start_time(pid) or started) - started) < 2.0
-    return url if alive and _healthy(url) else None
+    state = _live_record(home / _STATE)
+    url = None if state is None else str(state.get("url", ""))
+    return url if url and _healthy(url) else None
 
 
 def _starting(home: Path) -> bool:
     """True while a supervisor spawned for ``home`` runs (it may not answer yet)."""
-    try:
-        state = json.loads((home / _STARTING).read_text())
-        pid, started = int(state["pid"]), float(state["started"])
-    except (OSError, ValueError, KeyError):
-        return False
-    return process_alive(pid) and abs((start_time(pid) or started) - started) < 2.0
+    return _live_record(home / _STARTING) is not None
 
 
 def _spawn_supervisor(home: Path) -> None:

@@ -28,8 +28,8 @@ def _small_slab() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     nodes[inner] += np.random.default_rng(0).uniform(-5e-4, 5e-4, (int(inner.sum()), 3))
     tets = Delaunay(nodes).simplices.astype(np.int64)
     vol = signed_volumes(nodes, tets)
-    tets = tets[np.abs(vol) > 1e-12]
-    neg = signed_volumes(nodes, tets) < 0
+    keep = np.abs(vol) > 1e-12
+    tets, neg = tets[keep], vol[keep] < 0
     tets[neg] = tets[neg][:, [1, 0, 2, 3]]
     top = np.flatnonzero(np.isclose(nodes[:, 2], 0.01))
     driven = top[np.linalg.norm(nodes[top, :2] - 0.02, axis=1) < 0.011]
