@@ -30,6 +30,8 @@ from physanim.processes import OWNER_ENV, mark_children, process_alive, start_ti
 #: Seconds a shared server waits for the next run before it stops (``shared_server``).
 IDLE_ENV = "PHYSANIM_PREFECT_IDLE_S"
 _STATE, _LEASE, _LOCK, _STARTING = "server.json", "server.lease", "server.lock", "server.starting"
+#: Times the supervisor starts ``prefect server start`` before it gives up (``_supervise``).
+_ATTEMPTS = 3
 
 #: Settings applied unless the user already set them in the environment.
 DEFAULTS = {
@@ -93,7 +95,13 @@ def prefect_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple
         deadline = time.time() + startup_timeout
         while not _healthy(url):
             if proc.poll() is not None or time.time() > deadline:
-                raise RuntimeError(f"prefect server did not start; see {home / 'server.log'}")
+                log.flush()
+                why = (
+                    "it exited"
+                    if proc.poll() is not None
+                    else f"no answer in {startup_timeout:.0f} s"
+                )
+                raise RuntimeError(_not_started(home, why))
             time.sleep(0.5)
         yield url, True
     finally:
@@ -191,8 +199,10 @@ def shared_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple[
                 _spawn_supervisor(home)
             deadline = time.time() + startup_timeout
             while (url := _running_shared(home)) is None:
-                if time.time() > deadline or not _starting(home):
-                    raise RuntimeError(f"prefect server did not start; see {home / 'server.log'}")
+                if not _starting(home):
+                    raise RuntimeError(_not_started(home, f"it exited {_ATTEMPTS} times"))
+                if time.time() > deadline:
+                    raise RuntimeError(_not_started(home, f"no answer in {startup_timeout:.0f} s"))
                 time.sleep(0.25)
             started = True
     done = threading.Event()
@@ -214,25 +224,50 @@ def shared_server(home: Path, startup_timeout: float = 120.0) -> Iterator[tuple[
             lease.touch()  # the idle time counts from the end of this run
 
 
+def _not_started(home: Path, why: str) -> str:
+    """The error for a shared server that did not start: why, and the end of its log."""
+    log = home / "server.log"
+    try:
+        tail = "\n".join(log.read_text(errors="replace").splitlines()[-15:])
+    except OSError:
+        tail = "(no log)"
+    return f"prefect server did not start ({why}); the end of {log}:\n{tail}"
+
+
 def _idle_seconds() -> float:
     return float(os.environ.get(IDLE_ENV, "600"))
 
 
 def _supervise(home: Path) -> None:
-    """Run a Prefect server for ``home`` until it is idle (see ``shared_server``)."""
+    """Run a Prefect server for ``home`` until it is idle (see ``shared_server``).
+
+    A server that exits before it answers is started again on a new port, up to
+    ``_ATTEMPTS`` times: the port is only known free when it is picked, and the Dask cluster
+    that a run starts meanwhile binds ports of the same ephemeral range. Every attempt's
+    output goes to ``server.log``.
+    """
     idle_s = _idle_seconds()
-    port = free_port()
-    url = f"http://127.0.0.1:{port}/api"
-    cmd, env = _server_command(home, port)
-    with (home / "server.log").open("w") as log:
-        proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     state = home / _STATE
+    proc: subprocess.Popen | None = None
     try:
-        while not _healthy(url):
-            if proc.poll() is not None or stop.wait(0.25):
-                return
+        url = None
+        with (home / "server.log").open("w") as log:
+            for attempt in range(1, _ATTEMPTS + 1):
+                port = free_port()
+                log.write(f"--- physanim: prefect server start, attempt {attempt}, port {port}\n")
+                log.flush()
+                cmd, env = _server_command(home, port)
+                proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
+                while proc.poll() is None and not _healthy(f"http://127.0.0.1:{port}/api"):
+                    if stop.wait(0.25):
+                        return
+                if proc.poll() is None:
+                    url = f"http://127.0.0.1:{port}/api"
+                    break
+        if url is None:
+            return
         tmp = home / f".{_STATE}.{os.getpid()}"
         me = os.getpid()
         tmp.write_text(json.dumps({"pid": me, "started": start_time(me) or 0.0, "url": url}))
@@ -249,11 +284,12 @@ def _supervise(home: Path) -> None:
         with contextlib.suppress(OSError, ValueError):
             if json.loads(state.read_text()).get("pid") == os.getpid():
                 state.unlink()
-        proc.terminate()
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        if proc is not None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
 
 
 if __name__ == "__main__":

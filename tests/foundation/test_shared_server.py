@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from pathlib import Path
 
@@ -40,3 +41,23 @@ def test_runs_share_one_server_that_stops_when_idle(
     assert not (home / "server.json").exists()
     assert (home / "prefect.db").exists()  # the run history stays
     os.environ.pop(OWNER_ENV, None)
+
+
+def test_a_server_that_cannot_start_is_retried_then_explained(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    home = tmp_path / "prefect"
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    # a database Prefect cannot open: every `prefect server start` exits during its startup
+    bad = f"sqlite+aiosqlite:///{tmp_path / 'missing' / 'prefect.db'}"
+    monkeypatch.setenv("PREFECT_API_DATABASE_CONNECTION_URL", bad)
+    t0 = time.time()
+    with pytest.raises(RuntimeError) as err, shared_server(home, startup_timeout=300):
+        pass
+    assert time.time() - t0 < 200  # told as soon as the last attempt exits, not at the timeout
+    message = str(err.value)
+    assert "prefect server did not start (it exited 3 times)" in message
+    assert "unable to open database file" in message  # the end of the server's own log
+    log = (home / "server.log").read_text()
+    assert [int(n) for n in re.findall(r"attempt (\d), port", log)] == [1, 2, 3]
+    assert not (home / "server.json").exists()
