@@ -36,8 +36,8 @@ $(VENV)/.installed: pyproject.toml
 	@if [ -f /usr/include/suitesparse/cholmod.h ]; then \
 	  $(PY) -m pip install --quiet -e '.[cholmod]' || echo "scikit-sparse did not build; FEM uses SuperLU"; \
 	else echo "no SuiteSparse headers (make setup-system): FEM uses SuperLU"; fi
-	@# compile the FEM's numba kernels now (about 30 s), not inside the first pipeline run
-	$(PY) -m physanim.fem.warm
+	@# compile the numba kernels now (about 30 s), not inside the first pipeline run
+	$(PY) -m physanim.warm
 	@touch $@
 
 setup: system-check $(VENV)/.installed

@@ -217,14 +217,17 @@ def _worker_frame(t: int) -> _Frame:
 def _rendered_frames(scene: _Scene, workers: int) -> Iterator[_Frame]:
     """Frames 0..T-1 in order, rendered by ``workers`` processes (1: in this process)."""
     n = scene.p.n_frames
-    if workers <= 1 or n < 2:
-        yield from (_render_frame(scene, t) for t in range(n))
+    # the first frame renders here: that loads the compiled rasteriser, which forked
+    # workers then inherit instead of each loading it again
+    yield _render_frame(scene, 0)
+    if workers <= 1 or n < 3:
+        yield from (_render_frame(scene, t) for t in range(1, n))
         return
     # fork: the workers inherit the imported modules (a fresh interpreter would spend
-    # seconds importing open3d); they only run numpy/scipy on their own arrays
+    # seconds importing open3d); they only run numpy/scipy/numba on their own arrays
     ctx = multiprocessing.get_context("fork" if sys.platform == "linux" else "spawn")
     with ProcessPoolExecutor(workers, ctx, initializer=_init_worker, initargs=(scene,)) as pool:
-        yield from pool.map(_worker_frame, range(n))
+        yield from pool.map(_worker_frame, range(1, n))
 
 
 def default_workers() -> int:

@@ -108,14 +108,18 @@ def render_view(
     half = light_cam + view_dir
     half /= np.linalg.norm(half, axis=1, keepdims=True)
     spec = 0.12 * np.clip((nrm * half).sum(axis=1), 0.0, None)[:, None] ** 24
-    big = np.empty((h * s, w * s, 3))
+    # the face covers a few per cent of the image: filter the sub-samples only in its box
+    rows, cols = np.flatnonzero(ras.mask.any(axis=1)), np.flatnonzero(ras.mask.any(axis=0))
+    r0, r1 = rows[0] // s, rows[-1] // s + 1  # output pixels the face touches
+    c0, c1 = cols[0] // s, cols[-1] // s + 1
+    big = np.empty(((r1 - r0) * s, (c1 - c0) * s, 3))
     big[:] = BACKGROUND_RGB
-    big[ras.mask] = np.clip(albedo * (0.3 + 0.75 * diffuse) + spec, 0.0, 1.0)
-    color = np.zeros((h, w, 3))
-    for i in range(s):  # box filter over the s x s sub-samples (strided views, s^2 adds)
-        for j in range(s):
-            color += big[i::s, j::s]
-    color /= s * s
+    big[ras.mask[r0 * s : r1 * s, c0 * s : c1 * s]] = np.clip(
+        albedo * (0.3 + 0.75 * diffuse) + spec, 0.0, 1.0
+    )
+    color = np.empty((h, w, 3))
+    color[:] = _box_filter(np.broadcast_to(BACKGROUND_RGB, (s, s, 3)), s)
+    color[r0:r1, c0:c1] = _box_filter(big, s)
     if not with_depth:
         return View(color=color, depth=None, normal_dot_view=None)
 
@@ -127,6 +131,16 @@ def render_view(
         np.linalg.norm(n1, axis=1) * np.linalg.norm(p1, axis=1)
     )
     return View(color=color, depth=ras1.depth, normal_dot_view=ndv)
+
+
+def _box_filter(big: np.ndarray, s: int) -> np.ndarray:
+    """(H s, W s, 3) sub-samples -> (H, W, 3) means of each s x s block (strided views,
+    s^2 adds: the background outside the face's box gets the same rounding as inside)."""
+    out = np.zeros((big.shape[0] // s, big.shape[1] // s, 3))
+    for i in range(s):
+        for j in range(s):
+            out += big[i::s, j::s]
+    return out / (s * s)
 
 
 def color_to_uint8(color: np.ndarray, rng: np.random.Generator, noise_levels: float) -> np.ndarray:

@@ -1,8 +1,5 @@
-"""Compile the FEM's numba kernels into numba's on-disk cache ahead of the first run.
-
-A fresh clone has no cache: the first ``simulate`` then compiles every kernel it calls (about
-35 s on 2 cores, more than the simulation itself). ``make setup`` runs ``python -m
-physanim.fem.warm`` once after installing, so that the first pipeline run loads them instead.
+"""Compile the FEM's numba kernels ahead of the first run (``python -m physanim.warm`` runs
+``warm_kernels`` with the project's other kernels; see there).
 """
 
 from __future__ import annotations
@@ -51,11 +48,3 @@ def warm_kernels() -> dict[str, float]:
         simulate(nodes, tets, materials, driven, traj, 1 / 30, fixed, params)
         seconds[precision] = time.perf_counter() - t0
     return seconds
-
-
-if __name__ == "__main__":
-    took = warm_kernels()
-    print(
-        "FEM kernels compiled (numba cache): "
-        + ", ".join(f"{k} factor {v:.1f} s" for k, v in took.items())
-    )
