@@ -1,5 +1,6 @@
 """Benchmark face rendering per frame on the real face000 scan (44k vertices, 87k triangles):
-VTK in an isolated worker (default) vs VTK in-process vs the numpy rasteriser (baseline),
+VTK in an isolated worker (default) vs VTK in-process vs the project's rasteriser (baseline;
+numba z-buffer, numpy shading),
 and video encoding: VP9 .mp4 / VP8 .webm (browser-playable) vs mp4v (baseline, not
 playable in browsers), all in this process.
 
@@ -43,7 +44,7 @@ def main() -> None:
     for name, kw in [
         ("vtk, isolated worker (default)", dict(backend="vtk")),
         ("vtk, in-process", dict(backend="vtk", isolate=False)),
-        ("numpy rasteriser (baseline)", dict(backend="numpy")),
+        ("project rasteriser (baseline)", dict(backend="numpy")),
     ]:
         for label, sc in [("skin", None), ("colour map", disp)]:
             t0 = time.perf_counter()

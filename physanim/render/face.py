@@ -4,8 +4,8 @@ labelled colour bar, seen by a fixed camera (optionally a turntable).
 Two backends give the same framing (same camera model, same colour mapping, same bar):
 - ``"vtk"``: pyvista/VTK offscreen (EGL or OSMesa, no display needed); Gouraud-shaded, lit by
   VTK's light kit.  One plotter per sequence, points/normals/colours updated in place.
-- ``"numpy"``: the project's vectorised z-buffer rasteriser (``physanim.capture.raster``)
-  with Lambert + Blinn-Phong headlight shading; no OpenGL at all.
+- ``"numpy"``: the project's z-buffer rasteriser (``physanim.capture.raster``, compiled)
+  with Lambert + Blinn-Phong headlight shading in numpy; no OpenGL at all.
 
 Modules: :mod:`.camera` (camera model, frontal framing, turntable), :mod:`.colours` (skin,
 colour maps, colour bar), :mod:`.surface` (one renderer over both backends:

@@ -1,5 +1,6 @@
-"""Numpy backend of the face renders: the project's vectorised z-buffer rasteriser
-(``physanim.capture.raster``) with Lambert + Blinn-Phong headlight shading; no OpenGL at all."""
+"""Numpy backend of the face renders: the project's z-buffer rasteriser
+(``physanim.capture.raster``, compiled) with Lambert + Blinn-Phong headlight shading in numpy;
+no OpenGL at all."""
 
 from __future__ import annotations
 
