@@ -29,7 +29,18 @@ from pathlib import Path
 from physanim.capture.demo import default_workers, generate_demo
 from physanim.store import StageStore
 
-STAGES = ("ingest", "track", "fit", "align", "tetra", "materials", "simulate", "evaluate", "render")
+STAGES = (
+    "ingest",
+    "track",
+    "fit",
+    "scan",
+    "align",
+    "tetra",
+    "materials",
+    "simulate",
+    "evaluate",
+    "render",
+)
 
 
 def _cpu_s(who: int) -> float:

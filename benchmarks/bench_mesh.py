@@ -26,7 +26,13 @@ from physanim.fem.region_materials import tet_materials
 from physanim.mesh.align import align_motion_mesh
 from physanim.mesh.binding import bind_points, closest_points_on_triangles
 from physanim.mesh.kinematic import animate_bound_points
-from physanim.mesh.params import AlignParams, MaterialModel, MaterialsParams, TetraParams
+from physanim.mesh.params import (
+    AlignParams,
+    MaterialModel,
+    MaterialsParams,
+    ScanParams,
+    TetraParams,
+)
 from physanim.mesh.regions import LABEL_NAMES, plot_regions, region_areas, skin_regions, tet_regions
 from physanim.mesh.remesh import prepare_scan
 from physanim.mesh.tetra import label_nodes, landmark_nodes, tetrahedralize_surface
@@ -64,12 +70,12 @@ def main() -> None:
     args = ap.parse_args()
     out = args.out or Path(tempfile.mkdtemp(prefix="bench_mesh_"))
     out.mkdir(parents=True, exist_ok=True)
-    ap_, tp, mp = AlignParams(), TetraParams(), MaterialsParams()
+    sp_, ap_, tp, mp = ScanParams(), AlignParams(), TetraParams(), MaterialsParams()
 
     print("scan preparation")
     actor = build_actor()
     with Timer("prepare_scan (close holes + remesh)"):
-        v, f = prepare_scan(actor.vertices, actor.faces, ap_.remesh_edge_length_m)
+        v, f = prepare_scan(actor.vertices, actor.faces, sp_.remesh_edge_length_m)
     print(f"  skin: {len(v)} vertices, {len(f)} triangles (target 20-30k vertices)")
     markers = place_markers(v, f)
     pos = markers.positions(v, f)

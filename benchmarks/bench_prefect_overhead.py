@@ -25,7 +25,18 @@ from physanim.config import load_config
 from physanim.pipeline import Pipeline, StageSpec, execute_plan_locally, make_plan, run_plan
 from physanim.store import StageStore
 
-NAMES = ("ingest", "track", "fit", "align", "tetra", "materials", "simulate", "evaluate", "render")
+NAMES = (
+    "ingest",
+    "track",
+    "fit",
+    "scan",
+    "align",
+    "tetra",
+    "materials",
+    "simulate",
+    "evaluate",
+    "render",
+)
 
 
 class NoParams(BaseModel):

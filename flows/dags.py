@@ -18,7 +18,7 @@ from physanim.capture.params import DemoParams
 from physanim.pipeline import Pipeline, PipelineConfig, PlanEntry
 from physanim.store import StageStore
 from physanim.store.stage_store import LATEST
-from tasks import align, evaluate, fit, ingest, materials, render, simulate, tetra, track
+from tasks import align, evaluate, fit, ingest, materials, render, scan, simulate, tetra, track
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -48,6 +48,7 @@ FACE = Pipeline(
         ingest.SPEC,
         track.SPEC,
         fit.SPEC,
+        scan.SPEC,
         align.SPEC,
         tetra.SPEC,
         materials.SPEC,

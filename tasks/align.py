@@ -1,41 +1,30 @@
-"""Stage ``align``: prepare the high-res scan, align the motion mesh to it, bind, animate.
+"""Stage ``align``: align the motion mesh to the prepared scan (stage ``scan``), bind, animate.
 
-Outputs the prepared scan (border slits zipped shut, cut along the lip seam so the lips can
-part), the mouth line, the motion mesh in the scan frame, the binding of every scan vertex
-(never across the seam) and the kinematic shape-motion model (:class:`AlignOutput`).
+Outputs the scan cut along the lip seam (so the lips can part), the mouth line, the motion
+mesh in the scan frame, the binding of every scan vertex (never across the seam) and the
+kinematic shape-motion model (:class:`AlignOutput`).
 
 Version 3: ``fps`` is no longer copied into this output (read it from ``track``).
+Version 4: the scan is prepared by the ``scan`` stage (its settings moved there), which runs
+while the capture is ingested and tracked.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from pydantic import ConfigDict, Field
 
 from physanim.mesh.binding import Binding
 from physanim.mesh.params import AlignParams
-from physanim.pipeline import DatasetParams, StageContext, StageSpec
+from physanim.pipeline import StageContext, StageSpec
 from tasks.fit import FitOutput
+from tasks.scan import ScanOutput
 from tasks.track import TrackOutput
 
 if TYPE_CHECKING:
     from physanim.mesh.seam import MouthLine
-
-
-class AlignStageParams(AlignParams):
-    """Alignment settings plus the scan to bind (``face000``: the scan pymeshlab ships)."""
-
-    model_config = ConfigDict(extra="forbid")
-    scan: str = Field(
-        "face000",
-        description="high-res scan (PLY/OBJ/STL, in the marker template's frame) or 'face000'",
-    )
-    scan_units: str = Field("mm", pattern="^(mm|cm|m)$", description="units of the scan file")
 
 
 @dataclass(frozen=True)
@@ -76,47 +65,37 @@ class AlignOutput:
         return dict(zip(self.landmark_names, self.landmarks, strict=True))
 
 
-def fingerprint(dataset: DatasetParams, params: AlignStageParams) -> Mapping[str, object]:
-    """Size and modification time of the scan file (an edited scan re-runs align)."""
-    from physanim.store import files_fingerprint
-
-    path = Path(params.scan)
-    if params.scan == "face000" or not path.is_file():
-        return {"scan": params.scan}  # the packaged scan, or a missing file align reports
-    return {"scan": files_fingerprint([path], path.parent)}
-
-
 def compute(
-    params: AlignStageParams,
+    params: AlignParams,
     track: TrackOutput,
     fit: FitOutput,
-    ctx: StageContext[AlignStageParams],
+    scan: ScanOutput,
+    ctx: StageContext[AlignParams],
 ) -> AlignOutput:
-    """Scan prep, alignment of the motion mesh to the scan, lip seam, binding, kinematic scan."""
-    from physanim.face.scan import bind_scan, load_raw_scan
+    """Alignment of the motion mesh to the prepared scan, lip seam, binding, kinematic scan."""
+    from physanim.face.scan import bind_scan
 
-    raw_v, raw_f = load_raw_scan(params.scan, params.scan_units)
-    scan = bind_scan(
-        raw_v, raw_f, track.landmark_names, track.template, fit.motion, fit.triangles,
-        fit.vertex_names, params, ctx.progress("align"),
+    bound = bind_scan(
+        scan.vertices, scan.faces, track.landmark_names, track.template, fit.motion,
+        fit.triangles, fit.vertex_names, params, ctx.progress("align"),
     )  # fmt: skip
     ctx.summary.update(
-        scan_vertices=len(scan.vertices),
-        scan_faces=len(scan.faces),
-        lip_seam_edges=scan.seam_faces,
-        median_binding_distance_mm=round(float(np.median(scan.binding.distance)) * 1e3, 3),
+        scan_vertices=len(bound.vertices),
+        scan_faces=len(bound.faces),
+        lip_seam_edges=bound.seam_faces,
+        median_binding_distance_mm=round(float(np.median(bound.binding.distance)) * 1e3, 3),
     )
     return AlignOutput(
-        scan.vertices, scan.faces, scan.side, scan.parent, scan.mouth.points,
-        scan.motion.astype(np.float32), fit.triangles, scan.landmark_vertices, scan.landmarks,
-        scan.binding, scan.kinematic.astype(np.float32), scan.landmark_names, params.lip_band_m,
+        bound.vertices, bound.faces, bound.side, bound.parent, bound.mouth.points,
+        bound.motion.astype(np.float32), fit.triangles, bound.landmark_vertices,
+        bound.landmarks, bound.binding, bound.kinematic.astype(np.float32),
+        bound.landmark_names, params.lip_band_m,
     )  # fmt: skip
 
 
 SPEC = StageSpec.typed(
     "align",
     compute,
-    version="3",
-    doc="scan prep + remesh, motion mesh aligned to the scan, binding, kinematic model",
-    fingerprint=fingerprint,
+    version="4",
+    doc="motion mesh aligned to the prepared scan, lip seam cut, binding, kinematic model",
 )

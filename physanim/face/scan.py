@@ -1,9 +1,10 @@
-"""The high-res scan bound to the fitted motion mesh (the align stage's computation).
+"""The high-res scan loaded (the scan stage prepares it) and bound to the fitted motion mesh
+(the align stage's computation).
 
-The scan is prepared (border slits zipped shut, remeshed), the motion mesh aligned to it by
-the feature points, the scan cut along the lip seam (the fitted model's mouth slit, else the
-line through the mouth corners) so that the lips can part, every scan vertex bound to the
-motion mesh (never across the seam) and animated by it: the kinematic scan.
+The motion mesh is aligned to the prepared scan by the feature points, the scan cut along the
+lip seam (the fitted model's mouth slit, else the line through the mouth corners) so that the
+lips can part, every scan vertex bound to the motion mesh (never across the seam) and animated
+by it: the kinematic scan.
 """
 
 from __future__ import annotations
@@ -58,8 +59,8 @@ def load_raw_scan(scan: str, units: str) -> tuple[NDArray, NDArray]:
 
 
 def bind_scan(
-    raw_vertices: NDArray,
-    raw_faces: NDArray,
+    scan_v: NDArray,
+    scan_f: NDArray,
     landmark_names: list[str],
     template: NDArray,
     fit_motion: NDArray,
@@ -68,22 +69,17 @@ def bind_scan(
     params: AlignParams,
     progress: ProgressFn | None = None,
 ) -> BoundScan:
-    """Prepare the raw scan (V, 3) m, align the fitted motion mesh (``fit_motion`` (T, V, 3)
-    m, ``fit_triangles``, ``vertex_names``) to it by the feature points among the tracked
-    ``landmark_names`` (neutral positions ``template`` (K, 3) m, on the scan), cut, bind and
-    animate it."""
+    """Align the fitted motion mesh (``fit_motion`` (T, V, 3) m, ``fit_triangles``,
+    ``vertex_names``) to the prepared scan ``scan_v`` (N, 3) m, ``scan_f`` (F, 3) by the
+    feature points among the tracked ``landmark_names`` (neutral positions ``template`` (K, 3)
+    m, on the scan), cut the scan along the lip seam, bind and animate it."""
     from physanim.face.landmarks import FEATURE_POINTS
     from physanim.face.model import mouth_line_points
     from physanim.mesh.align import align_motion_mesh
     from physanim.mesh.kinematic import animate_bound_points
-    from physanim.mesh.remesh import prepare_scan
     from physanim.mesh.seam import bind_across_seam, cut_surface
     from physanim.names import name_index
 
-    scan_v, scan_f = prepare_scan(
-        raw_vertices, raw_faces, params.remesh_edge_length_m, params.remesh_iterations,
-        params.notch_max_gap_m, params.notch_min_depth_m,
-    )  # fmt: skip
     features = [n for n in FEATURE_POINTS if n in landmark_names]
     scan_lms = template[name_index(landmark_names, features)]
     lm_vertices = name_index(vertex_names, features)

@@ -1,8 +1,8 @@
-"""Parameters of the mesh stages (align, tetra, materials) and the materials-file model."""
+"""Parameters of the mesh stages (scan, align, tetra, materials) and the materials-file model."""
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -20,8 +20,8 @@ REGION_LANDMARKS: dict[str, tuple[str, ...]] = {
 }
 
 
-class AlignParams(BaseModel):
-    """Scan preparation, alignment and binding (the ``align`` stage)."""
+class ScanParams(BaseModel):
+    """Scan preparation: border slits zipped shut, isotropic remesh (the ``scan`` stage)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -35,6 +35,44 @@ class AlignParams(BaseModel):
     remesh_iterations: int = Field(
         6, ge=1, le=50, description="Isotropic remeshing iterations (count)."
     )
+    notch_max_gap_m: float = Field(
+        0.006,
+        ge=0.0,
+        le=0.05,
+        description="Slits reaching into the scan from its border (creases the scanner lost) "
+        "narrower than this across the view axis are zipped shut, metres (0 keeps them).",
+    )
+    notch_min_depth_m: float = Field(
+        0.008,
+        gt=0.0,
+        le=0.2,
+        description="Only slits longer than this along the border are closed, metres.",
+    )
+
+
+#: Settings that the ``align`` section had until the ``scan`` stage took them over.
+_MOVED_TO_SCAN = (
+    "scan", "scan_units", "remesh_edge_length_m", "remesh_iterations", "notch_max_gap_m",
+    "notch_min_depth_m",
+)  # fmt: skip
+
+
+class AlignParams(BaseModel):
+    """Alignment of the motion mesh to the prepared scan, lip seam, binding (``align``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _moved_to_scan(cls, data: Any) -> Any:
+        moved = [k for k in _MOVED_TO_SCAN if isinstance(data, dict) and k in data]
+        if moved:
+            raise ValueError(
+                f"{', '.join(moved)} moved to the scan section: write scan: {{{moved[0]}: ...}}"
+                " instead of align: {...} (the scan stage prepares the scan since align v4)"
+            )
+        return data
+
     scaling: Literal["similarity", "per_axis"] = Field(
         "per_axis",
         description="'similarity': Umeyama rotation + uniform scale; 'per_axis': rigid Umeyama "
@@ -53,19 +91,6 @@ class AlignParams(BaseModel):
         0.01,
         gt=0.0,
         description="Wireframe vertices farther than this from the scan are not pulled, metres.",
-    )
-    notch_max_gap_m: float = Field(
-        0.006,
-        ge=0.0,
-        le=0.05,
-        description="Slits reaching into the scan from its border (creases the scanner lost) "
-        "narrower than this across the view axis are zipped shut, metres (0 keeps them).",
-    )
-    notch_min_depth_m: float = Field(
-        0.008,
-        gt=0.0,
-        le=0.2,
-        description="Only slits longer than this along the border are closed, metres.",
     )
     lip_band_m: float = Field(
         0.015,

@@ -123,7 +123,7 @@ def prepare_scan(
 
     Args:
         vertices: (N, 3) cleaned scan, metres; faces: (M, 3) int.
-        edge_length_m: target edge length, metres (``AlignParams.remesh_edge_length_m``).
+        edge_length_m: target edge length, metres (``ScanParams.remesh_edge_length_m``).
         iterations: remeshing passes.
         notch_max_gap_m, notch_min_depth_m: slits reaching in from the border narrower than
             the gap and deeper than the depth (metres) are zipped shut

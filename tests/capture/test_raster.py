@@ -14,7 +14,8 @@ SIZE = (48, 64)
 
 
 def _plane(z0: float, slope: float, half: float) -> np.ndarray:
-    """Corners (4, 3) m of the square |x|, |y| <= half * z (edges between pixel centres) on the plane z = z0 + slope x."""
+    """Corners (4, 3) m of the square |x|, |y| <= half * z on the plane z = z0 + slope x
+    (choose ``half`` so that its edges fall between pixel centres)."""
     corners = []
     for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
         z = z0 / (1.0 - slope * sx * half)  # the corner on the ray (sx half, sy half, 1)

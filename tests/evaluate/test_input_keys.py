@@ -46,14 +46,14 @@ def test_edited_ground_truth_changes_the_evaluate_key(tmp_path: Path) -> None:
     ("stage", "relative", "params"),
     [
         ("track", "stereo/calibration.yaml", {"lift": "stereo"}),
-        ("align", "scan.ply", {}),
+        ("scan", "scan.ply", {}),
     ],
 )
 def test_edited_input_file_changes_the_key(tmp_path, stage, relative, params) -> None:
     path = tmp_path / relative
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("one\n")
-    if stage == "align":
+    if stage == "scan":
         params = {"scan": str(path)}
     dataset = DatasetParams(dir=str(tmp_path))
     before = key(stage, dataset, **params)

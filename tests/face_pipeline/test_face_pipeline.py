@@ -189,7 +189,7 @@ def test_model_sweep_computes_shared_stages_once(model_sweep, demo_run) -> None:
     data, keys, ran, report_path = model_sweep
     counts = {s.name: ran.count(s.name) for s in FACE.stages}
     assert counts == {
-        "ingest": 0, "track": 0, "fit": 0, "align": 0, "tetra": 0,
+        "ingest": 0, "track": 0, "fit": 0, "scan": 0, "align": 0, "tetra": 0,
         "materials": 2, "simulate": 2, "evaluate": 2, "render": 3,
     }  # fmt: skip
     store = StageStore(ROOT / data / "runs" / "store.zarr")
@@ -251,9 +251,10 @@ def test_reduced_preview_of_a_model_against_its_full_run(model_sweep, demo_run) 
 
 def test_dag_upstream_and_downstream_closures() -> None:
     assert FACE.upstream("simulate") == [
-        "ingest", "track", "fit", "align", "tetra", "materials", "simulate"
+        "ingest", "track", "fit", "scan", "align", "tetra", "materials", "simulate"
     ]  # fmt: skip
-    assert FACE.upstream("tetra") == ["ingest", "track", "fit", "align", "tetra"]
+    assert FACE.upstream("tetra") == ["ingest", "track", "fit", "scan", "align", "tetra"]
+    assert FACE.upstream("scan") == ["scan"]  # reads no stage: it runs beside ingest
     assert FACE.downstream("materials") == ["materials", "simulate", "evaluate", "render"]
     assert FACE.upstream("ingest") == ["ingest"]
 

@@ -25,6 +25,7 @@ LAYERS: list[set[str]] = [
     {"tracking"},  # tracking backends (use the face model's landmarks)
     {"evaluate"},
     {"render"},  # the run report compares evaluations
+    {"warm"},  # the setup's compile-ahead entry point (runs fem's and capture's kernels)
 ]
 FORBIDDEN = ("prefect", "flows", "tasks", "cli")
 

@@ -138,3 +138,16 @@ def test_stiffness_sweep_grid_varies_only_E(tmp_path: Path, monkeypatch) -> None
     assert [v.name for v in variants] == [
         f"materials.model.default.E_kPa={e}" for e in (96.2, 192.4, 384.8)
     ]
+
+
+def test_scan_settings_under_align_name_their_new_section(tmp_path: Path) -> None:
+    """The scan settings moved from ``align`` to the ``scan`` stage: an old config is refused
+    with the key, the file and the new place, and the same value under ``scan`` loads."""
+    old = tmp_path / "old.yaml"
+    old.write_text("align: {remesh_edge_length_m: 0.001, lip_band_m: 0.012}\n")
+    with pytest.raises(ConfigError, match=r"old.yaml.*remesh_edge_length_m moved to the scan"):
+        load_config(FACE.config_model(), [FACE.default_config, old], [])
+    new = tmp_path / "new.yaml"
+    new.write_text("align: {lip_band_m: 0.012}\nscan: {remesh_edge_length_m: 0.001}\n")
+    cfg, _ = load_config(FACE.config_model(), [FACE.default_config, new], [])
+    assert cfg.scan.remesh_edge_length_m == 0.001 and cfg.align.lip_band_m == 0.012

@@ -8,7 +8,7 @@ import pytest
 from physanim.capture.actor import Actor, build_actor
 from physanim.capture.markers import place_markers
 from physanim.face.landmarks import FEATURE_POINTS
-from physanim.mesh.params import AlignParams
+from physanim.mesh.params import ScanParams
 from physanim.mesh.remesh import prepare_scan
 
 
@@ -20,8 +20,8 @@ def actor() -> Actor:
 
 @pytest.fixture(scope="session")
 def skin(actor: Actor) -> tuple[np.ndarray, np.ndarray]:
-    """face000 prepared with the default AlignParams: (V (N, 3) m, F (M, 3))."""
-    p = AlignParams()
+    """face000 prepared with the default ScanParams: (V (N, 3) m, F (M, 3))."""
+    p = ScanParams()
     return prepare_scan(actor.vertices, actor.faces, p.remesh_edge_length_m, p.remesh_iterations)
 
 
