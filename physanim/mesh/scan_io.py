@@ -39,6 +39,21 @@ def face000_path() -> Path:
     return path
 
 
+def _read_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (N, 3) float64 and faces (M, 3) int64 of a PLY/OBJ/STL file, as stored.
+
+    Read by Open3D, not pymeshlab: pymeshlab's loader changes the process's working directory
+    to the file's folder while it reads, and a relative path opened by another thread in that
+    moment (the run's stages run side by side) names the wrong file. STL repeats each
+    triangle's corners: shared corners are merged into one vertex."""
+    import open3d as o3d
+
+    mesh = o3d.io.read_triangle_mesh(str(path), enable_post_processing=False)
+    if path.suffix.lower() == ".stl":
+        mesh.remove_duplicated_vertices()
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64)
+
+
 def load_scan(path: Path | str, units: Units) -> tuple[np.ndarray, np.ndarray]:
     """Load a triangle-mesh scan and convert it to metres.
 
@@ -54,14 +69,10 @@ def load_scan(path: Path | str, units: Units) -> tuple[np.ndarray, np.ndarray]:
         raise FileNotFoundError(f"{path}: scan file not found")
     if path.suffix.lower() not in SUPPORTED_SUFFIXES:
         raise ScanError(f"{path}: unsupported scan format; use one of {SUPPORTED_SUFFIXES}")
-    ms = pymeshlab.MeshSet()
-    try:
-        ms.load_new_mesh(str(path))
-    except pymeshlab.PyMeshLabException as exc:
-        raise ScanError(f"{path}: cannot read the mesh ({exc})") from exc
-    mesh = ms.current_mesh()
-    vertices = np.asarray(mesh.vertex_matrix(), dtype=np.float64) * UNIT_SCALE[units]
-    faces = np.asarray(mesh.face_matrix(), dtype=np.int64)
+    vertices, faces = _read_mesh(path)
+    if len(vertices) == 0:
+        raise ScanError(f"{path}: cannot read a triangle mesh from the file (damaged?)")
+    vertices = vertices * UNIT_SCALE[units]
     if len(faces) == 0 or len(vertices) < 3:
         raise ScanError(f"{path}: the mesh has no triangles (a point cloud is not supported)")
     extent = float(np.ptp(vertices, axis=0).max())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,52 @@ def test_missing_and_unsupported_files(tmp_path: Path) -> None:
     bad = tmp_path / "scan.xyz"
     bad.write_text("0 0 0\n")
     with pytest.raises(ScanError, match="unsupported"):
+        load_scan(bad, "mm")
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".obj", ".stl"])
+def test_each_format_loads_the_same_connected_surface(tmp_path: Path, suffix: str) -> None:
+    """A 12 x 12 grid written by Open3D reads back with its 144 shared vertices and 242
+    triangles in every format (STL stores each corner per triangle: they are merged)."""
+    import open3d as o3d
+
+    v, f = grid(12, 0.01)
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(v), o3d.utility.Vector3iVector(f))
+    mesh.compute_triangle_normals()  # STL stores a normal per triangle
+    path = tmp_path / f"scan{suffix}"
+    assert o3d.io.write_triangle_mesh(str(path), mesh)
+    lv, lf = load_scan(path, "m")
+    assert lv.shape == (144, 3) and lf.shape == (242, 3)
+    np.testing.assert_allclose(np.sort(lv, axis=0), np.sort(v, axis=0), atol=1e-6)
+    corners = np.sort(lv[lf].reshape(len(lf), -1), axis=0)  # same triangles, any numbering
+    np.testing.assert_allclose(corners, np.sort(v[f].reshape(len(f), -1), axis=0), atol=1e-6)
+
+
+def test_loading_never_moves_the_working_directory(tmp_path: Path) -> None:
+    """Stages run side by side in threads: a relative path another thread opens while a scan
+    loads must still name the same file (pymeshlab's loader changed directory meanwhile)."""
+    import threading
+
+    seen, done = set(), threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            seen.add(os.getcwd())
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    try:
+        load_scan(face000_path(), "mm")
+    finally:
+        done.set()
+        watcher.join()
+    assert seen == {os.getcwd()}
+
+
+def test_damaged_file_is_named(tmp_path: Path) -> None:
+    bad = tmp_path / "scan.ply"
+    bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 9\n")
+    with pytest.raises(ScanError, match=r"scan\.ply: cannot read a triangle mesh"):
         load_scan(bad, "mm")
 
 
