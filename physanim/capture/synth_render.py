@@ -110,8 +110,9 @@ def render_view(
     spec = 0.12 * np.clip((nrm * half).sum(axis=1), 0.0, None)[:, None] ** 24
     # the face covers a few per cent of the image: filter the sub-samples only in its box
     rows, cols = np.flatnonzero(ras.mask.any(axis=1)), np.flatnonzero(ras.mask.any(axis=0))
-    r0, r1 = rows[0] // s, rows[-1] // s + 1  # output pixels the face touches
-    c0, c1 = cols[0] // s, cols[-1] // s + 1
+    r0, r1, c0, c1 = 0, 0, 0, 0  # output pixels the face touches (none: all background)
+    if len(rows):
+        r0, r1, c0, c1 = rows[0] // s, rows[-1] // s + 1, cols[0] // s, cols[-1] // s + 1
     big = np.empty(((r1 - r0) * s, (c1 - c0) * s, 3))
     big[:] = BACKGROUND_RGB
     big[ras.mask[r0 * s : r1 * s, c0 * s : c1 * s]] = np.clip(
