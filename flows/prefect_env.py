@@ -260,11 +260,12 @@ def _supervise(home: Path) -> None:
                 log.flush()
                 cmd, env = _server_command(home, port)
                 proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
-                while proc.poll() is None and not _healthy(f"http://127.0.0.1:{port}/api"):
+                candidate = f"http://127.0.0.1:{port}/api"
+                while proc.poll() is None and not _healthy(candidate):
                     if stop.wait(0.25):
                         return
                 if proc.poll() is None:
-                    url = f"http://127.0.0.1:{port}/api"
+                    url = candidate
                     break
         if url is None:
             return
