@@ -26,21 +26,12 @@ import subprocess
 import time
 from pathlib import Path
 
+from flows.dags import FACE
 from physanim.capture.demo import default_workers, generate_demo
 from physanim.store import StageStore
 
-STAGES = (
-    "ingest",
-    "track",
-    "fit",
-    "scan",
-    "align",
-    "tetra",
-    "materials",
-    "simulate",
-    "evaluate",
-    "render",
-)
+#: The face DAG's stages, in order
+STAGES = tuple(s.name for s in FACE.stages)
 
 
 def _cpu_s(who: int) -> float:

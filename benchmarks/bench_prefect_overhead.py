@@ -21,22 +21,13 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict
 
+from flows.dags import FACE
 from physanim.config import load_config
 from physanim.pipeline import Pipeline, StageSpec, execute_plan_locally, make_plan, run_plan
 from physanim.store import StageStore
 
-NAMES = (
-    "ingest",
-    "track",
-    "fit",
-    "scan",
-    "align",
-    "tetra",
-    "materials",
-    "simulate",
-    "evaluate",
-    "render",
-)
+#: The face DAG's stages, in order (the no-op DAG copies their names)
+NAMES = tuple(s.name for s in FACE.stages)
 
 
 class NoParams(BaseModel):
