@@ -145,6 +145,21 @@ class TetraParams(BaseModel):
     edge_length_m: float = Field(
         0.0035, gt=1e-4, le=0.05, description="Target tetrahedron edge length, metres."
     )
+    outside_edge_length_m: float | None = Field(
+        0.02,
+        gt=1e-4,
+        le=0.2,
+        description="fTetWild's target edge length away from the tissue, where its tets are "
+        "discarded, metres; the target grows from edge_length_m at outside_growth. null: "
+        "edge_length_m everywhere (on the demo about twice as slow).",
+    )
+    outside_growth: float = Field(
+        2.0,
+        gt=0.0,
+        le=100.0,
+        description="Growth of fTetWild's target edge length with distance outside the tissue "
+        "(metres per metre).",
+    )
     epsilon_rel: float = Field(
         1e-2,
         gt=0.0,

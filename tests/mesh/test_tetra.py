@@ -10,9 +10,12 @@ from physanim.mesh.tetra import (
     aspect_ratios,
     boundary_faces,
     dihedral_angles,
+    distance_to_surface,
+    inside_closed_surface,
     label_nodes,
     landmark_nodes,
     orient_and_check,
+    sizing_field,
     tet_volumes,
     tetrahedralize_surface,
 )
@@ -81,6 +84,56 @@ def test_box_tetrahedralisation_fills_its_volume_within_the_envelope():
     assert enclosed == pytest.approx(q.volume_m3, rel=1e-9)
 
 
+def sphere_surface(radius: float, n: int = 800) -> tuple[np.ndarray, np.ndarray]:
+    """Closed outward-oriented sphere surface: (n, 3) m on a Fibonacci lattice, its hull."""
+    from scipy.spatial import ConvexHull
+
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    phi = np.pi * (1 + 5**0.5) * k
+    v = radius * np.c_[np.sqrt(1 - z**2) * np.cos(phi), np.sqrt(1 - z**2) * np.sin(phi), z]
+    f = ConvexHull(v).simplices
+    flip = (
+        np.einsum(
+            "fi,fi->f", np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), v[f[:, 0]]
+        )
+        < 0
+    )
+    f[flip] = f[flip][:, ::-1]
+    return v, f
+
+
+def test_inside_and_distance_of_a_sphere_are_analytic():
+    r = 0.03
+    v, f = sphere_surface(r)
+    rng = np.random.default_rng(3)
+    p = rng.uniform(-2 * r, 2 * r, size=(2000, 3))
+    radial = np.linalg.norm(p, axis=1)
+    away = np.abs(radial - r) > 0.002  # the inscribed hull lies up to ~0.3 mm inside the sphere
+    inside = inside_closed_surface(p, v, f)
+    np.testing.assert_array_equal(inside[away], radial[away] < r)
+    np.testing.assert_allclose(distance_to_surface(p, v, f), np.abs(radial - r), atol=5e-4)
+
+
+def test_sizing_field_is_fine_inside_and_grows_outside():
+    r = 0.03
+    v, f = sphere_surface(r)
+    params = TetraParams(edge_length_m=0.004, outside_edge_length_m=0.02, outside_growth=2.0)
+    points, tets, h = sizing_field(v, f, params)
+    # the background mesh covers fTetWild's box (1/15 of the extent beyond the surface)
+    assert np.all(points.min(axis=0) < -r * (1 + 2 / 15)) and np.all(
+        points.max(axis=0) > r * (1 + 2 / 15)
+    )
+    assert tets.dtype == np.int32 and tets.max() == len(points) - 1
+    radial = np.linalg.norm(points, axis=1)
+    assert np.all(h[radial <= r] == params.edge_length_m)
+    d = radial - r
+    expected = np.clip(0.004 + 2.0 * (d - 0.004), 0.004, 0.02)
+    out = d > 0.001
+    np.testing.assert_allclose(h[out], expected[out], atol=1e-3)
+    assert h.max() == pytest.approx(0.02)
+
+
 def test_open_surface_is_reported():
     v, f = box_surface(np.ones(3))
     assert any("open" in p for p in watertight_problems(f[:-1]))
@@ -112,6 +165,10 @@ def test_coarse_face_tets_are_positive_and_labelled(skin, landmarks):
     # Scaled from the default range (5-10k nodes at the default edge length) to this one.
     scale = (TetraParams().edge_length_m / params.edge_length_m) ** 3
     assert 5_000 * scale * 0.5 <= q.n_nodes <= 10_000 * scale * 1.5
+    # the coarse target outside the tissue (sizing_field) does not reach inside it
+    p = mesh.nodes[mesh.tets]
+    edges = np.linalg.norm(p[:, [0, 0, 0, 1, 1, 2]] - p[:, [1, 2, 3, 2, 3, 3]], axis=2)
+    assert np.median(edges) <= 1.2 * params.edge_length_m
     lm = np.array([landmarks[n] for n in FEATURE_POINTS])
     labels = label_nodes(mesh, surface, params)
     assert labels.skin.sum() > 0 and labels.bone.sum() > 0
