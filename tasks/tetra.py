@@ -82,4 +82,5 @@ SPEC = StageSpec.typed(
     compute,
     version="3",
     doc="tissue volume (skin + bone-side offset), fTetWild tets, quality, node labels",
+    varies=True,  # fTetWild's mesh differs from run to run, even on one thread
 )

@@ -79,6 +79,7 @@ def execute_stage(
         "params": params.model_dump(mode="json"),
         "key_params": dict(entry.params),
         "upstream": dict(entry.upstream),
+        "varying_inputs": _varying_inputs(pipeline, store, entry.upstream),
         "pipeline": pipeline.name,
     }
     with store.writing(spec.name, entry.key, provenance, replace=entry.forced) as group:
@@ -102,6 +103,19 @@ def execute_stage(
     return StageResult(
         spec.name, entry.key, "ran", seconds, ctx.summary, started, f"{_HOST}:{os.getpid()}"
     )
+
+
+def _varying_inputs(
+    pipeline: Pipeline, store: StageStore, upstream: Mapping[str, str]
+) -> dict[str, dict[str, str | None]]:
+    """stage -> {key, digest} of every output of a ``varies`` stage that ``upstream``
+    (stage -> key) was computed from, directly or through its own inputs."""
+    out: dict[str, dict[str, str | None]] = {}
+    for stage, key in upstream.items():
+        out.update(store.varying_inputs(stage, key))
+        if pipeline.stage(stage).varies:
+            out[stage] = {"key": key, "digest": store.content_digest(stage, key)}
+    return out
 
 
 def record_run(

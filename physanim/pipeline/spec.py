@@ -106,6 +106,9 @@ class StageSpec(Generic[P]):
     group itself.  ``files``: plain files the stage writes in its ``files/`` folder that a
     report shows, relative path -> caption (PNG figures, the MP4 video).  ``label``: names
     the variant a params value makes, for reports comparing runs (e.g. the material model).
+    ``varies``: the output may differ between two runs with the same key (fTetWild's mesh):
+    outputs computed from it record its content digest and read as stale once ``--force``
+    has replaced it with different content.
     """
 
     name: str
@@ -118,6 +121,7 @@ class StageSpec(Generic[P]):
     output: type | None = None
     files: Mapping[str, str] = field(default_factory=dict)
     label: Callable[[P], str] | None = None
+    varies: bool = False
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():
@@ -133,6 +137,7 @@ class StageSpec(Generic[P]):
         fingerprint: Callable[[DatasetParams, P], Mapping[str, Any]] | None = None,
         files: Mapping[str, str] | None = None,
         label: Callable[[Any], str] | None = None,
+        varies: bool = False,
     ) -> StageSpec[Any]:
         """A stage from a typed function ``compute(params: P, <upstream>: <Output>, ...,
         ctx: StageContext[P]) -> Output``: its first argument's annotation is the params model,
@@ -152,7 +157,7 @@ class StageSpec(Generic[P]):
         run = TypedCompute(compute, inputs, output, "ctx" in names)
         return cls(
             name, tuple(n for n, _ in inputs), hints[names[0]], version, run, doc,
-            fingerprint, output, dict(files or {}), label,
+            fingerprint, output, dict(files or {}), label, varies,
         )  # fmt: skip
 
     @property

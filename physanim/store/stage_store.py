@@ -275,7 +275,8 @@ class StageStore:
         """What is wrong with the group at ``<stage>/<key>``; None when it is absent or intact.
 
         Checks that the metadata reads, that the output was committed complete and that every
-        file of its manifest is present with its size (and, with ``checksums``, its SHA-256).
+        file of its manifest is present with its size (and, with ``checksums``, its SHA-256),
+        then that no output it was computed from has been replaced by different content since.
         Outputs written before manifests existed are taken as they are.
         """
         path = self._path(stage, key)
@@ -293,6 +294,11 @@ class StageStore:
         manifest = attrs.get("manifest")
         if manifest is None:
             return None
+        problem = self._file_damage(path, meta, manifest, checksums)
+        return problem if problem is not None else self._staleness(attrs)
+
+    def _file_damage(self, path: Path, meta: Path, manifest: Any, checksums: bool) -> str | None:
+        """The first file of ``manifest`` missing, resized or (``checksums``) altered."""
         try:
             files = [(rel, int(size), str(digest)) for rel, (size, digest) in manifest.items()]
         except (AttributeError, TypeError, ValueError):
@@ -308,6 +314,39 @@ class StageStore:
             if checksums and _sha256(f) != digest:
                 return f"{_part(rel, manifest)} does not match its checksum"
         return None
+
+    def _staleness(self, attrs: Mapping[str, Any]) -> str | None:
+        """Why an output no longer follows from its inputs: an upstream output it was computed
+        from has since been replaced by different content (``--force`` of a stage whose result
+        varies from run to run, such as fTetWild's mesh); None when every input is unchanged."""
+        for stage, made_from in (attrs.get("varying_inputs") or {}).items():
+            key = made_from.get("key") or ""
+            now = self.content_digest(stage, key) if key else None
+            if now is not None and now != made_from.get("digest"):
+                return (
+                    f"stale: computed from an earlier output of {stage} ({key[:12]}), which "
+                    "was since recomputed with different content (--force)"
+                )
+        return None
+
+    def varying_inputs(self, stage: str, key: str) -> dict[str, dict[str, str | None]]:
+        """The ``varying_inputs`` an output recorded: stage -> {key, digest} of the outputs
+        of ``varies`` stages it was computed from ({} for none or an unreadable output)."""
+        try:
+            attrs = json.loads((self._path(stage, key) / "zarr.json").read_text())["attributes"]
+            return dict(attrs.get("varying_inputs") or {})
+        except (OSError, ValueError, KeyError, TypeError):
+            return {}
+
+    def content_digest(self, stage: str, key: str) -> str | None:
+        """SHA-256 of an output's manifest (every file's size and checksum): the same for the
+        same content; None when the output or its manifest is absent or unreadable."""
+        try:
+            attrs = json.loads((self._path(stage, key) / "zarr.json").read_text())["attributes"]
+            manifest = attrs["manifest"]
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+        return hashlib.sha256(json.dumps(manifest, sort_keys=True).encode()).hexdigest()
 
     def has(self, stage: str, key: str) -> bool:
         """True when a complete, intact output of ``stage`` with ``key`` exists."""
@@ -443,7 +482,9 @@ class StageStore:
         On an exception the temporary copy is removed and the exception propagates.  If another
         writer committed the same key meanwhile, this copy is discarded (same content key).
         ``replace`` (``--force``): an existing output is replaced, only once this one is
-        complete.  A damaged group in the way is moved to the quarantine.
+        complete.  A damaged group in the way is moved to the quarantine.  ``provenance``'s
+        ``varying_inputs`` (stage -> {key, digest}, :meth:`content_digest`) make the output
+        stale once one of those outputs is replaced by different content.
         """
         _ensure_group(self.root / stage)
         tmp = self.root / TMP / self._tmp_name(stage, key)
