@@ -18,7 +18,19 @@ from physanim.capture.params import DemoParams
 from physanim.pipeline import Pipeline, PipelineConfig, PlanEntry
 from physanim.store import StageStore
 from physanim.store.stage_store import LATEST
-from tasks import align, evaluate, fit, ingest, materials, render, scan, simulate, tetra, track
+from tasks import (
+    align,
+    evaluate,
+    fit,
+    ingest,
+    materials,
+    render,
+    scan,
+    simulate,
+    tetra,
+    tiles,
+    track,
+)
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -50,6 +62,7 @@ FACE = Pipeline(
         fit.SPEC,
         scan.SPEC,
         align.SPEC,
+        tiles.SPEC,
         tetra.SPEC,
         materials.SPEC,
         simulate.SPEC,

@@ -7,6 +7,7 @@ plots (``physanim.render.plots.plot_face_run``), all in this output's files/.
 
 Version 5: panels kept as PNG only at the evaluated peak frames by default
 (``render.png_frames``), the plots drawn while the tiles render.
+Version 6: the fit and kinematic tiles come from the ``tiles`` stage.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from tasks.align import AlignOutput
 from tasks.ingest import IngestOutput
 from tasks.simulate import SimulateOutput
 from tasks.tetra import TetraOutput
+from tasks.tiles import TilesOutput
 from tasks.track import TrackOutput
 
 #: What the render stage's files show (a report lists those present), path -> caption.
@@ -53,6 +55,7 @@ def compute(
     tetra: TetraOutput,
     simulate: SimulateOutput,
     evaluate: FaceEvaluation,
+    tiles: TilesOutput,
     ctx: StageContext[PanelParams],
 ) -> RenderOutput:
     """panel frames + video + plots of the upstream chain."""
@@ -61,13 +64,12 @@ def compute(
 
     footage = FaceFootage(
         colour=ingest.color, uv=track.uv, confidence=track.confidence, fps=float(track.fps),
-        fit_motion=align.motion, fit_triangles=align.triangles,
-        scan_vertices=align.scan_vertices, scan_faces=align.scan_faces,
-        scan_side=align.scan_side, kinematic=align.kinematic,
-        nodes=tetra.nodes, tets=tetra.tets, mouth=align.mouth(),
+        motion_tiles=tiles.by_title(), scan_vertices=align.scan_vertices,
+        scan_faces=align.scan_faces, scan_side=align.scan_side, nodes=tetra.nodes,
+        tets=tetra.tets, mouth=align.mouth(),
         displacements=simulate.displacements,
     )  # fmt: skip
-    cache = ctx.dataset.run_dir / "cache" / "render-tiles"
+    embeddings = ctx.dataset.run_dir / "cache" / "embeddings"
     energies = dict(
         kinetic=simulate.kinetic, strain=simulate.strain, dissipated=simulate.dissipated
     )
@@ -76,7 +78,7 @@ def compute(
         plots = pool.submit(
             plot_face_run, simulate.times, energies, simulate.jaw, evaluate, ctx.files_dir
         )
-        done = render_face_panel(footage, params, ctx.files_dir, cache, ctx.progress, peaks)
+        done = render_face_panel(footage, params, ctx.files_dir, embeddings, ctx.progress, peaks)
         plots.result()
     n = len(done.frames)
     ctx.summary.update(
@@ -91,7 +93,7 @@ def compute(
 SPEC = StageSpec.typed(
     "render",
     compute,
-    version="5",
+    version="6",
     doc="panel video (capture | fit | kinematic | FEM), symmetry / mouth / energy plots",
     files=FILES,
 )

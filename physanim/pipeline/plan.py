@@ -63,7 +63,8 @@ def _why(
     old, new = _flat(prev.get("key_params", {}), ""), _flat(dict(params), "")
     for k in sorted(set(old) | set(new)):
         if old.get(k) != new.get(k):
-            label = f"{spec.name}.{k.removeprefix('params.')}" if k.startswith("params.") else k
+            section = spec.section or spec.name  # as the user writes it in a config
+            label = f"{section}.{k.removeprefix('params.')}" if k.startswith("params.") else k
             reasons.append(f"{label}: {old.get(k, '(unset)')!r} -> {new.get(k, '(unset)')!r}")
     changed = [u for u, key in upstream.items() if prev.get("upstream", {}).get(u) != key]
     if changed:
@@ -105,7 +106,7 @@ def make_plan(
     keys: dict[str, str] = {}
     entries: list[PlanEntry] = []
     for spec in pipeline.stages:
-        params = key_params(spec, dataset, getattr(config, spec.name))
+        params = key_params(spec, dataset, spec.params_from(config))
         upstream = {u: keys[u] for u in spec.upstream}
         try:
             key = keys[spec.name] = stage_key(spec.name, spec.version, params, upstream)

@@ -73,7 +73,7 @@ def execute_stage(
     t0, started = time.perf_counter(), time.time()
     if not entry.forced and store.has(spec.name, entry.key):
         return StageResult(spec.name, entry.key, "cached", 0.0, {})
-    params = getattr(config, spec.name)
+    params = spec.params_from(config)
     provenance = {
         "version": spec.version,
         "params": params.model_dump(mode="json"),

@@ -108,7 +108,9 @@ class StageSpec(Generic[P]):
     the variant a params value makes, for reports comparing runs (e.g. the material model).
     ``varies``: the output may differ between two runs with the same key (fTetWild's mesh):
     outputs computed from it record its content digest and read as stale once ``--force``
-    has replaced it with different content.
+    has replaced it with different content.  ``section``: the stage takes its params from
+    another stage's config section (the fields its params model declares), instead of a
+    section of its own (e.g. ``tiles`` renders with the ``render`` section's tile size).
     """
 
     name: str
@@ -122,10 +124,19 @@ class StageSpec(Generic[P]):
     files: Mapping[str, str] = field(default_factory=dict)
     label: Callable[[P], str] | None = None
     varies: bool = False
+    section: str | None = None
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():
             raise ValueError(f"stage name {self.name!r} must be a Python identifier")
+
+    def params_from(self, config: PipelineConfig) -> P:
+        """This stage's params in ``config``: its own section, or the fields its params model
+        declares of the ``section`` it shares."""
+        value = getattr(config, self.section or self.name)
+        if self.section is None:
+            return value
+        return self.params.model_validate(value.model_dump(include=set(self.params.model_fields)))
 
     @classmethod
     def typed(
@@ -138,6 +149,7 @@ class StageSpec(Generic[P]):
         files: Mapping[str, str] | None = None,
         label: Callable[[Any], str] | None = None,
         varies: bool = False,
+        section: str | None = None,
     ) -> StageSpec[Any]:
         """A stage from a typed function ``compute(params: P, <upstream>: <Output>, ...,
         ctx: StageContext[P]) -> Output``: its first argument's annotation is the params model,
@@ -157,7 +169,7 @@ class StageSpec(Generic[P]):
         run = TypedCompute(compute, inputs, output, "ctx" in names)
         return cls(
             name, tuple(n for n, _ in inputs), hints[names[0]], version, run, doc,
-            fingerprint, output, dict(files or {}), label, varies,
+            fingerprint, output, dict(files or {}), label, varies, section,
         )  # fmt: skip
 
     @property
@@ -205,6 +217,16 @@ class Pipeline:
                         f"{getattr(wanted, '__name__', wanted)}, but {u} stores "
                         f"{getattr(given, '__name__', given)}"
                     )
+            if s.section is not None:
+                owner = next((o for o in self.stages if o.name == s.section), None)
+                extra = set(s.params.model_fields) - set(owner.params.model_fields if owner else ())
+                if owner is None or owner.section is not None or extra:
+                    raise ValueError(
+                        f"pipeline {self.name}: stage {s.name} shares section {s.section!r}, "
+                        "which must be another stage's own section with every field "
+                        f"{s.params.__name__} declares"
+                        + (f" (lacks {sorted(extra)})" if extra else "")
+                    )
             seen.add(s.name)
 
     def stage(self, name: str) -> StageSpec:
@@ -239,7 +261,8 @@ class Pipeline:
         for name, model in self.extra_sections.items():
             sections[name] = (model, model())
         for s in self.stages:
-            sections[s.name] = (s.params, s.params())
+            if s.section is None:  # a stage sharing another's section adds none
+                sections[s.name] = (s.params, s.params())
         return create_model(f"{self.name.title()}Config", __base__=PipelineConfig, **sections)
 
     def edges(self) -> list[tuple[str, str, type | None]]:
@@ -250,7 +273,10 @@ class Pipeline:
         """The DAG as text: each stage, its version, doc, and what each incoming edge carries."""
         out = []
         for s in self.stages:
-            out.append(f"{s.name} (v{s.version})" + (f": {s.doc}" if s.doc else "") + "\n")
+            settings = f", settings: {s.section}" if s.section else ""
+            out.append(
+                f"{s.name} (v{s.version}{settings})" + (f": {s.doc}" if s.doc else "") + "\n"
+            )
             out += [f"  <- {u}: {describe_output(self.stage(u).output)}\n" for u in s.upstream]
         return "".join(out)
 

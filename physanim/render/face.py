@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Literal
 
 import numpy as np
@@ -34,11 +33,6 @@ from physanim.render.isolated import render_isolated
 from physanim.render.surface import check_mesh, render_frames
 
 Backend = Literal["auto", "vtk", "numpy"]
-#: the renderer's source files (a cache of rendered frames keys on their contents)
-CODE_FILES = tuple(
-    Path(__file__).with_name(f"{m}.py")
-    for m in ("face", "camera", "colours", "surface", "vtk_backend", "raster_backend", "isolated")
-)
 
 
 def _frame_scalars(scalars: np.ndarray | None, n_frames: int) -> np.ndarray | None:

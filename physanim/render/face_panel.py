@@ -9,7 +9,7 @@ capture frame rate (divided by the frame stride).
 from __future__ import annotations
 
 import time
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,16 +20,37 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from physanim.mesh.seam import MouthLine
-from physanim.pipeline import ProgressFactory
+from physanim.pipeline import ProgressFactory, ProgressFn
 
 
-class PanelParams(BaseModel):
-    """Rendering settings."""
+class TileParams(BaseModel):
+    """What the 3D tiles share: their size, the frame stride and the camera's path."""
 
     model_config = ConfigDict(extra="forbid")
     tile_width_px: int = Field(480, ge=64, le=4096, description="width of each panel tile, px")
     tile_height_px: int = Field(640, ge=64, le=4096, description="height of each tile, px")
     every_frames: int = Field(1, ge=1, le=1000, description="render every n-th frame")
+    turntable: bool = Field(False, description="turn the 3D tiles once around over the video")
+
+    def frames(self, n_frames: int) -> NDArray:
+        """(R,) the frame indices rendered of ``n_frames``."""
+        return np.arange(0, n_frames, self.every_frames)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(W, H) px of a tile."""
+        return (self.tile_width_px, self.tile_height_px)
+
+    def azimuth(self, n_rendered: int) -> NDArray | None:
+        """(R,) camera azimuths in degrees of a turntable over ``n_rendered`` tiles, or None."""
+        if not self.turntable:
+            return None
+        return np.linspace(0.0, 360.0, n_rendered, endpoint=False)
+
+
+class PanelParams(TileParams):
+    """Rendering settings."""
+
     png_frames: Literal["peaks", "all", "none"] = Field(
         "peaks",
         description="panels also kept as PNG (frames/<frame>.png): 'peaks' = the evaluated "
@@ -39,7 +60,6 @@ class PanelParams(BaseModel):
     displacement_max_mm: float = Field(
         0.0, ge=0.0, le=100.0, description="colour-bar top, mm (0: the run's maximum)"
     )
-    turntable: bool = Field(False, description="turn the 3D tiles once around over the video")
 
     @field_validator("png_frames", mode="before")
     @classmethod
@@ -53,22 +73,20 @@ class FaceFootage:
 
     ``colour`` (T, H, W, 3) uint8 RGB capture (lazy); ``uv`` (T, K, 2) px tracked landmarks
     (NaN: unseen), ``confidence`` (T, K) in [0, 1]; ``fps`` frames/s of the capture;
-    ``fit_motion`` (T, V, 3) m the fitted motion mesh in the scan frame, ``fit_triangles``
-    (F_m, 3); ``scan_vertices`` (N, 3) m, ``scan_faces`` (F, 3), ``scan_side`` (N,) lip
-    sides; ``kinematic`` (T, N, 3) m the kinematic scan (lazy); ``nodes`` (n, 3) m, ``tets``
-    (M, 4), ``mouth`` the lip seam; ``displacements`` (T, n, 3) m of the FEM nodes.
+    ``motion_tiles`` title -> (R, H, W, 3) uint8 tiles of the rendered frames already
+    rendered (:func:`motion_tiles`); ``scan_vertices`` (N, 3) m, ``scan_faces`` (F, 3),
+    ``scan_side`` (N,) lip sides; ``nodes`` (n, 3) m, ``tets`` (M, 4), ``mouth`` the lip
+    seam; ``displacements`` (T, n, 3) m of the FEM nodes.
     """
 
     colour: Any
     uv: NDArray
     confidence: NDArray
     fps: float
-    fit_motion: NDArray
-    fit_triangles: NDArray
+    motion_tiles: Mapping[str, NDArray]
     scan_vertices: NDArray
     scan_faces: NDArray
     scan_side: NDArray
-    kinematic: Any
     nodes: NDArray
     tets: NDArray
     mouth: MouthLine
@@ -90,24 +108,21 @@ def render_face_panel(
     footage: FaceFootage,
     params: PanelParams,
     folder: Path,
-    cache_dir: Path,
+    embeddings: Path,
     progress: ProgressFactory,
     peaks: Collection[int] = (),
 ) -> FacePanel:
     """Render every ``params.every_frames``-th frame of ``footage`` as a panel into
     ``folder``: ``panel.mp4`` and, as ``params.png_frames`` asks, ``frames/<frame>.png``
-    (``peaks``: the frames 'peaks' keeps).
-
-    The 3D tiles render in worker processes while this one crops the capture; the fit and
-    kinematic tiles, which no material edit changes, come from the tile cache in
-    ``cache_dir`` when their inputs did not change."""
-    frames = np.arange(0, footage.displacements.shape[0], params.every_frames)
-    size = (params.tile_width_px, params.tile_height_px)
+    (``peaks``: the frames 'peaks' keeps). The FEM tiles render in a worker process while this
+    one crops the capture (``embeddings``: the folder caching the scan's embedding in the
+    tets); the fit and kinematic tiles come rendered (``motion_tiles``)."""
+    frames = params.frames(footage.displacements.shape[0])
     t0 = time.perf_counter()
     with ThreadPoolExecutor(1) as pool:
-        tiles = pool.submit(model_tiles, footage, frames, params, cache_dir, progress)
-        captured = capture_tiles(footage, frames, size)
-        rendered = tiles.result()
+        fem = pool.submit(fem_tiles, footage, frames, params, embeddings, progress("render FEM"))
+        captured = capture_tiles(footage, frames, params.size)
+        rendered = {**footage.motion_tiles, "FEM": fem.result()}
     render_s = time.perf_counter() - t0
     panels = compose_panels(footage, frames, captured, rendered)
     keep = {"all": frames, "none": (), "peaks": peaks}[params.png_frames]
@@ -116,61 +131,77 @@ def render_face_panel(
     return FacePanel(frames, video, codec, render_s)
 
 
-def model_tiles(
-    footage: FaceFootage,
-    frames: NDArray,
-    params: PanelParams,
-    cache_dir: Path,
+def motion_tiles(
+    fit_motion: NDArray,
+    fit_triangles: NDArray,
+    kinematic: Any,
+    scan_vertices: NDArray,
+    scan_faces: NDArray,
+    params: TileParams,
     progress: ProgressFactory,
 ) -> dict[str, NDArray]:
-    """Title -> (R, H, W, 3) uint8 tiles of the fit, the kinematic scan and the FEM skin
-    (coloured by displacement, mm) at ``frames`` (R,), seen by one frontal camera.
-
-    The three sequences render at once, each in its own worker process; the fit and
-    kinematic ones through a :class:`~physanim.render.tile_cache.TileCache` in ``cache_dir``."""
-    from physanim.mesh.embed import embedded_displacements
-    from physanim.render.camera import frontal_camera
-    from physanim.render.colours import ColourMap
+    """Title -> (R, H, W, 3) uint8 tiles of the fitted motion mesh (``fit_motion`` (T, V, 3)
+    m, ``fit_triangles``) and of the kinematic scan (``kinematic`` (T, N, 3) m, numpy or Zarr,
+    on ``scan_faces``) at the frames ``params`` selects, each rendered in its own worker
+    process, by the camera of the FEM tiles (framed on ``scan_vertices`` (N, 3) m)."""
     from physanim.render.face import render_sequence
-    from physanim.render.tile_cache import TileCache
-    from physanim.store.file_cache import FileCache
 
-    size = (params.tile_width_px, params.tile_height_px)
-    scan_v, scan_f = footage.scan_vertices, footage.scan_faces
-    camera = frontal_camera(scan_v, size, bar=True)
-    # the FEM tile shows the high-res scan embedded in the tets, moved by their displacement
-    disp = embedded_displacements(
-        scan_v, footage.scan_side, footage.nodes, footage.tets, footage.mouth,
-        footage.displacements[frames], FileCache(cache_dir.with_name("embeddings"), keep=4),
-    )  # fmt: skip
-    magnitude_mm = np.linalg.norm(disp, axis=-1) * 1e3
-    top = params.displacement_max_mm or max(float(magnitude_mm.max()), 1e-3)
-    bar = ColourMap("displacement (mm)", clim=(0.0, top))
-    azimuth = np.linspace(0.0, 360.0, len(frames), endpoint=False) if params.turntable else None
+    frames = params.frames(fit_motion.shape[0])
+    camera = _camera(scan_vertices, params)
     jobs = {
         "CANDIDE-style fit": dict(
-            vertices=footage.fit_motion[frames], faces=footage.fit_triangles,
-            progress=progress("render fit"),
+            vertices=fit_motion[frames], faces=fit_triangles, progress=progress("render fit")
         ),
         "kinematic scan": dict(
-            vertices=_frames(footage.kinematic, frames), faces=scan_f,
+            vertices=_frames(kinematic, frames), faces=scan_faces,
             progress=progress("render kinematic"),
         ),
-        "FEM": dict(
-            vertices=scan_v[None] + disp, faces=scan_f, scalars=magnitude_mm, colour_map=bar,
-            progress=progress("render FEM"),
-        ),
     }  # fmt: skip
-    cache = TileCache(cache_dir)
+    azimuth = params.azimuth(len(frames))
     with ThreadPoolExecutor(len(jobs)) as pool:
         futures = {
             name: pool.submit(
-                render_sequence if name == "FEM" else cache.render,
-                **job, camera=camera, size=size, azimuth_deg=azimuth,
+                render_sequence, **job, camera=camera, size=params.size, azimuth_deg=azimuth
             )
             for name, job in jobs.items()
-        }  # fmt: skip
+        }
         return {name: f.result() for name, f in futures.items()}
+
+
+def fem_tiles(
+    footage: FaceFootage,
+    frames: NDArray,
+    params: PanelParams,
+    embeddings: Path,
+    progress: ProgressFn,
+) -> NDArray:
+    """(R, H, W, 3) uint8 tiles of the FEM skin at ``frames`` (R,): the high-res scan embedded
+    in the tets, moved by their displacement and coloured by it (mm, with a colour bar); the
+    embedding is kept in the folder ``embeddings`` by the content of its inputs."""
+    from physanim.mesh.embed import embedded_displacements
+    from physanim.render.colours import ColourMap
+    from physanim.render.face import render_sequence
+    from physanim.store.file_cache import FileCache
+
+    scan_v = footage.scan_vertices
+    disp = embedded_displacements(
+        scan_v, footage.scan_side, footage.nodes, footage.tets, footage.mouth,
+        footage.displacements[frames], FileCache(embeddings, keep=4),
+    )  # fmt: skip
+    magnitude_mm = np.linalg.norm(disp, axis=-1) * 1e3
+    top = params.displacement_max_mm or max(float(magnitude_mm.max()), 1e-3)
+    return render_sequence(
+        scan_v[None] + disp, footage.scan_faces, scalars=magnitude_mm,
+        colour_map=ColourMap("displacement (mm)", clim=(0.0, top)), progress=progress,
+        camera=_camera(scan_v, params), size=params.size, azimuth_deg=params.azimuth(len(frames)),
+    )  # fmt: skip
+
+
+def _camera(scan_vertices: NDArray, params: TileParams) -> Any:
+    """The frontal camera of every 3D tile, framed on the scan (room for the colour bar)."""
+    from physanim.render.camera import frontal_camera
+
+    return frontal_camera(scan_vertices, params.size, bar=True)
 
 
 def capture_tiles(footage: FaceFootage, frames: NDArray, size: tuple[int, int]) -> list[NDArray]:

@@ -190,6 +190,7 @@ def test_model_sweep_computes_shared_stages_once(model_sweep, demo_run) -> None:
     counts = {s.name: ran.count(s.name) for s in FACE.stages}
     assert counts == {
         "ingest": 0, "track": 0, "fit": 0, "scan": 0, "align": 0, "tetra": 0,
+        "tiles": 1,  # once for the three: the sweep renders every 6th frame
         "materials": 2, "simulate": 2, "evaluate": 2, "render": 3,
     }  # fmt: skip
     store = StageStore(ROOT / data / "runs" / "store.zarr")
@@ -255,6 +256,10 @@ def test_dag_upstream_and_downstream_closures() -> None:
     ]  # fmt: skip
     assert FACE.upstream("tetra") == ["ingest", "track", "fit", "scan", "align", "tetra"]
     assert FACE.upstream("scan") == ["scan"]  # reads no stage: it runs beside ingest
+    # the fit and kinematic tiles render while the tissue is meshed; no material edit
+    # renders them again
+    assert FACE.upstream("tiles") == ["ingest", "track", "fit", "scan", "align", "tiles"]
+    assert "tiles" not in FACE.downstream("materials") and "tiles" in FACE.upstream("render")
     assert FACE.downstream("materials") == ["materials", "simulate", "evaluate", "render"]
     assert FACE.upstream("ingest") == ["ingest"]
 

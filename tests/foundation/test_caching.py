@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import BaseModel, ConfigDict
 
 from physanim.config import load_config
-from physanim.pipeline import Pipeline, execute_plan_locally, make_plan
+from physanim.pipeline import Pipeline, StageContext, StageSpec, execute_plan_locally, make_plan
 from physanim.store import StageStore
 from tests.foundation.toy_stages import executions as ran
 from tests.foundation.toy_stages import toy_pipeline
@@ -79,3 +80,36 @@ def test_only_refuses_when_upstream_missing(toy_config: Path) -> None:
     pipe = toy_pipeline(toy_config)
     with pytest.raises(ValueError, match="needs source"):
         run(pipe, toy_config, only="scale")
+
+
+class _SlowOnly(BaseModel):
+    """The part of ``source``'s settings a stage sharing that section reads."""
+
+    model_config = ConfigDict(extra="forbid")
+    slow_s: float = 0.0
+
+
+def _echo(ctx: StageContext) -> None:
+    ctx.write("slow_s", np.array([ctx.params.slow_s]))  # type: ignore[attr-defined]
+
+
+def test_a_stage_sharing_a_section_reads_its_fields_and_keys_on_them(toy_config: Path) -> None:
+    """``section``: the stage takes the fields its params model declares from another stage's
+    section (as ``tiles`` takes ``render``'s tile size); the config gains no section for it,
+    and only those fields enter its key."""
+    base = toy_pipeline(toy_config)
+    echo = StageSpec("echo", ("source",), _SlowOnly, "1", _echo, section="source")
+    pipe = Pipeline("toy", (*base.stages, echo), toy_config)
+    assert "echo" not in pipe.config_model().model_fields
+    planned, _ = run(pipe, toy_config, "source.slow_s=0.01")
+    assert planned == ["source", "scale", "total", "echo"]
+    store = StageStore(toy_config.parent / "data" / "runs" / "store.zarr")
+    assert float(store.open("echo")["slow_s"][0]) == 0.01
+    config, _ = load_config(pipe.config_model(), [toy_config], ["source.slow_s=0.01"])
+    keys = {e.stage: e.key for e in make_plan(pipe, config, store)}
+    assert echo.params_from(config) == _SlowOnly(slow_s=0.01)
+    config, _ = load_config(pipe.config_model(), [toy_config], ["source.slow_s=0.02"])
+    assert {e.stage: e.key for e in make_plan(pipe, config, store)}["echo"] != keys["echo"]
+    wrong = StageSpec("echo", ("source",), _SlowOnly, "1", _echo, section="scale")
+    with pytest.raises(ValueError, match=r"shares section 'scale'.*lacks \['slow_s'\]"):
+        Pipeline("toy", (*base.stages, wrong), toy_config)

@@ -141,29 +141,3 @@ def test_vtk_crash_falls_back_to_numpy(actor, monkeypatch):
     np.testing.assert_array_equal(got, expected)
     with pytest.raises(RuntimeError, match="render worker exited"):
         render_sequence(seq, actor.faces, size=SIZE, backend="vtk")
-
-
-def test_tile_cache_renders_each_input_once(actor, tmp_path, monkeypatch):
-    import physanim.render.face as face
-    from physanim.render.tile_cache import TileCache
-
-    calls = []
-    real = face.render_sequence
-
-    def counted(*args, **kwargs):
-        calls.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(face, "render_sequence", counted)
-    seq = actor.vertices[None] + np.zeros((2, 1, 3))
-    cache = TileCache(tmp_path / "tiles", keep=1)
-    camera = frontal_camera(actor.vertices, SIZE)
-    job = dict(vertices=seq, faces=actor.faces, camera=camera, size=SIZE, backend="numpy")
-    first = cache.render(**job)
-    again = cache.render(**job, progress=lambda done, total: calls.append(0))
-    assert face_mask(first[0]).mean() > 0.05  # the face is in the picture
-    np.testing.assert_array_equal(first, again)
-    assert calls == [1, 0]  # rendered once; the second call only reported progress
-    moved = cache.render(**{**job, "vertices": seq + 0.01})  # other input: rendered
-    assert calls == [1, 0, 1] and np.abs(moved.astype(int) - first).mean() > 0.1
-    assert len(list((tmp_path / "tiles").glob("*.npy"))) == 1  # keep=1: the oldest went
