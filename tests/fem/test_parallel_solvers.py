@@ -122,3 +122,28 @@ def test_parallel_csr_product_and_quadratic_form(n_threads):
     q = SymmetricQuadraticForm(S, n_threads)
     assert q(y) == pytest.approx(y @ (S @ y), rel=1e-12)
     assert q.data.size < 0.6 * S.nnz  # only the upper triangle is stored
+
+
+@pytest.mark.parametrize("nested", [True, False])
+def test_common_pattern_combines_matrices_exactly(nested):
+    """K, M, C values on one pattern: any combination of the value arrays is the sparse sum,
+    whether one pattern holds the others (the demo) or they only overlap."""
+    from physanim.fem.newmark import _common_pattern
+
+    rng = np.random.default_rng(5)
+    n = 60
+    big = sp.random(n, n, density=0.2, random_state=rng)
+    big = (big + big.T + sp.eye(n)).tocsr()
+    if nested:  # a sub-pattern of big: some of its entries, scaled
+        small = big.multiply(sp.random(n, n, density=0.5, random_state=rng) > 0)
+        small = (small + small.T).tocsr()
+    else:
+        small = sp.random(n, n, density=0.1, random_state=rng)
+        small = (small + small.T).tocsr()
+    third = (2.0 * big).tocsr()
+    pattern, (a, b, c) = _common_pattern(big, small, third)
+    combined = pattern.copy()
+    combined.data = a + 3.0 * b - 0.5 * c
+    expected = big + 3.0 * small - 0.5 * third
+    np.testing.assert_allclose(combined.toarray(), expected.toarray(), rtol=0, atol=1e-12)
+    assert pattern.has_sorted_indices
