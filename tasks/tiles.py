@@ -12,11 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from physanim.pipeline import StageContext, StageSpec
-from physanim.render.face_panel import TileParams
+from physanim.render.face_panel import FIT_TITLE, KINEMATIC_TITLE, TileParams
 from tasks.align import AlignOutput
-
-#: The panel titles of the two tile sequences (in panel order, after the capture).
-FIT, KINEMATIC = "CANDIDE-style fit", "kinematic scan"
 
 
 @dataclass(frozen=True)
@@ -30,7 +27,7 @@ class TilesOutput:
 
     def by_title(self) -> dict[str, np.ndarray]:
         """Panel title -> tiles, in panel order."""
-        return {FIT: self.fit, KINEMATIC: self.kinematic}
+        return {FIT_TITLE: self.fit, KINEMATIC_TITLE: self.kinematic}
 
 
 def compute(params: TileParams, align: AlignOutput, ctx: StageContext[TileParams]) -> TilesOutput:
@@ -42,7 +39,7 @@ def compute(params: TileParams, align: AlignOutput, ctx: StageContext[TileParams
         params, ctx.progress,
     )  # fmt: skip
     frames = params.frames(align.motion.shape[0])
-    return TilesOutput(frames, tiles[FIT], tiles[KINEMATIC])
+    return TilesOutput(frames, tiles[FIT_TITLE], tiles[KINEMATIC_TITLE])
 
 
 SPEC = StageSpec.typed(

@@ -22,6 +22,9 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from physanim.mesh.seam import MouthLine
 from physanim.pipeline import ProgressFactory, ProgressFn
 
+#: Panel titles of the fit and kinematic-scan tiles (the capture's comes first, the FEM's last).
+FIT_TITLE, KINEMATIC_TITLE = "CANDIDE-style fit", "kinematic scan"
+
 
 class TileParams(BaseModel):
     """What the 3D tiles share: their size, the frame stride and the camera's path."""
@@ -149,10 +152,10 @@ def motion_tiles(
     frames = params.frames(fit_motion.shape[0])
     camera = _camera(scan_vertices, params)
     jobs = {
-        "CANDIDE-style fit": dict(
+        FIT_TITLE: dict(
             vertices=fit_motion[frames], faces=fit_triangles, progress=progress("render fit")
         ),
-        "kinematic scan": dict(
+        KINEMATIC_TITLE: dict(
             vertices=_frames(kinematic, frames), faces=scan_faces,
             progress=progress("render kinematic"),
         ),

@@ -332,21 +332,23 @@ class StageStore:
     def varying_inputs(self, stage: str, key: str) -> dict[str, dict[str, str | None]]:
         """The ``varying_inputs`` an output recorded: stage -> {key, digest} of the outputs
         of ``varies`` stages it was computed from ({} for none or an unreadable output)."""
-        try:
-            attrs = json.loads((self._path(stage, key) / "zarr.json").read_text())["attributes"]
-            return dict(attrs.get("varying_inputs") or {})
-        except (OSError, ValueError, KeyError, TypeError):
-            return {}
+        return dict((self._attributes(stage, key) or {}).get("varying_inputs") or {})
 
     def content_digest(self, stage: str, key: str) -> str | None:
         """SHA-256 of an output's manifest (every file's size and checksum): the same for the
         same content; None when the output or its manifest is absent or unreadable."""
-        try:
-            attrs = json.loads((self._path(stage, key) / "zarr.json").read_text())["attributes"]
-            manifest = attrs["manifest"]
-        except (OSError, ValueError, KeyError, TypeError):
+        manifest = (self._attributes(stage, key) or {}).get("manifest")
+        if manifest is None:
             return None
         return hashlib.sha256(json.dumps(manifest, sort_keys=True).encode()).hexdigest()
+
+    def _attributes(self, stage: str, key: str) -> dict[str, Any] | None:
+        """The attributes of ``<stage>/<key>``'s group; None when absent or unreadable."""
+        try:
+            attrs = json.loads((self._path(stage, key) / "zarr.json").read_text())["attributes"]
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+        return attrs if isinstance(attrs, dict) else None
 
     def has(self, stage: str, key: str) -> bool:
         """True when a complete, intact output of ``stage`` with ``key`` exists."""
