@@ -183,6 +183,17 @@ class TetraParams(BaseModel):
         "stop_energy after 1-2 passes of 5-8 s each; a few kept going for 10 passes or more "
         "(fTetWild is not deterministic), which made tetra take from 20 s to 3 min.",
     )
+    min_dihedral_deg: float = Field(
+        1.0,
+        ge=0.0,
+        lt=60.0,
+        description="fTetWild runs again (up to mesh_attempts runs in all) while its mesh's "
+        "smallest dihedral angle is below this, and the best mesh is kept, deg. fTetWild is "
+        "not deterministic: on two cores about 1 coarse face mesh in 10 had a 0.1-1 deg sliver.",
+    )
+    mesh_attempts: int = Field(
+        3, ge=1, le=10, description="fTetWild runs at most, to meet min_dihedral_deg (count)."
+    )
     sliver_dihedral_deg: float = Field(
         5.0, gt=0.0, lt=60.0, description="Tets with a dihedral angle below this are slivers, deg."
     )

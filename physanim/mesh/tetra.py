@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import warnings
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -39,7 +40,8 @@ class TetQuality:
 
     ``n_slivers`` counts tets whose smallest dihedral angle is below ``sliver_dihedral_deg``;
     ``n_inverted_input`` counts tets that came out of the mesher negatively oriented and were
-    flipped (fTetWild's own orientation convention is negative, so usually all of them).
+    flipped (fTetWild's own orientation convention is negative, so usually all of them);
+    ``attempts`` counts the fTetWild runs made to meet ``TetraParams.min_dihedral_deg``.
     """
 
     n_nodes: int
@@ -52,6 +54,7 @@ class TetQuality:
     median_aspect_ratio: float
     n_slivers: int
     n_inverted_input: int
+    attempts: int = 1
 
     def as_dict(self) -> dict[str, float | int]:
         """Plain dict for logs and store attributes."""
@@ -201,6 +204,10 @@ def tetrahedralize_surface(
     """Tetrahedralise a closed surface with fTetWild at ``params.edge_length_m`` inside,
     coarser outside where its tets are discarded (:func:`sizing_field`).
 
+    fTetWild is not deterministic; while its mesh's smallest dihedral angle is below
+    ``params.min_dihedral_deg`` it runs again, up to ``params.mesh_attempts`` runs, and the
+    best mesh is kept (a warning says when none met the floor).
+
     Args:
         vertices: (N, 3) closed surface, metres; faces: (M, 3) int.
         params: edge length, envelope, optimisation and quality thresholds.
@@ -208,19 +215,41 @@ def tetrahedralize_surface(
     Returns:
         The positively oriented :class:`TetMesh` (no unused nodes) and its :class:`TetQuality`.
     """
-    import pytetwild  # imports pyvista at load time
-
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int32)
     sizing: dict[str, np.ndarray] = {}
-    edge_length = max(params.edge_length_m, params.outside_edge_length_m or 0.0)
-    if edge_length > params.edge_length_m:
+    if max(params.edge_length_m, params.outside_edge_length_m or 0.0) > params.edge_length_m:
         bg_vertices, bg_tets, bg_values = sizing_field(vertices, faces, params)
         sizing = {"bg_vertices": bg_vertices, "bg_tets": bg_tets, "bg_values": bg_values}
+    runs: list[tuple[TetMesh, TetQuality]] = []
+    while len(runs) < params.mesh_attempts:
+        runs.append(_ftetwild(vertices, faces, params, sizing))
+        if runs[-1][1].min_dihedral_deg >= params.min_dihedral_deg:
+            break
+    mesh, quality = max(runs, key=lambda run: run[1].min_dihedral_deg)
+    quality = replace(quality, attempts=len(runs))
+    if quality.min_dihedral_deg < params.min_dihedral_deg:
+        warnings.warn(
+            f"fTetWild's best of {len(runs)} meshes has a {quality.min_dihedral_deg:.2f} deg "
+            f"dihedral angle, below tetra.min_dihedral_deg = {params.min_dihedral_deg} deg; "
+            "raise tetra.mesh_attempts or tetra.max_opt_iterations",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    return mesh, quality
+
+
+def _ftetwild(
+    vertices: np.ndarray, faces: np.ndarray, params: TetraParams, sizing: dict[str, np.ndarray]
+) -> tuple[TetMesh, TetQuality]:
+    """One fTetWild run on the surface (N, 3) m / (M, 3) int32 with the background ``sizing``
+    mesh (empty: uniform), oriented and checked."""
+    import pytetwild  # imports pyvista at load time
+
     nodes, tets = pytetwild.tetrahedralize(
         vertices,
         faces,
-        edge_length_abs=edge_length,
+        edge_length_abs=max(params.edge_length_m, params.outside_edge_length_m or 0.0),
         epsilon=params.epsilon_rel,
         optimize=params.optimize,
         stop_energy=params.stop_energy,

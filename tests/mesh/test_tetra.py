@@ -84,6 +84,17 @@ def test_box_tetrahedralisation_fills_its_volume_within_the_envelope():
     assert enclosed == pytest.approx(q.volume_m3, rel=1e-9)
 
 
+def test_ftetwild_runs_again_below_the_dihedral_floor():
+    v, f = box_surface(np.array([0.04, 0.03, 0.02]))
+    met = TetraParams(edge_length_m=0.008, min_dihedral_deg=0.0, mesh_attempts=3)
+    assert tetrahedralize_surface(v, f, met)[1].attempts == 1
+    # no tet mesh of a box has every dihedral angle above 59.9 deg: all runs made, warned
+    unmet = met.model_copy(update={"min_dihedral_deg": 59.9, "mesh_attempts": 2})
+    with pytest.warns(RuntimeWarning, match="best of 2 meshes.*tetra.min_dihedral_deg"):
+        mesh, q = tetrahedralize_surface(v, f, unmet)
+    assert q.attempts == 2 and q.min_dihedral_deg == dihedral_angles(mesh.nodes, mesh.tets).min()
+
+
 def sphere_surface(radius: float, n: int = 800) -> tuple[np.ndarray, np.ndarray]:
     """Closed outward-oriented sphere surface: (n, 3) m on a Fibonacci lattice, its hull."""
     from scipy.spatial import ConvexHull
