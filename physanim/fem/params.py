@@ -29,7 +29,8 @@ class SimulateParams(BaseModel):
     error_estimate: Literal["acceleration", "doubling"] = Field(
         "acceleration",
         description="adaptive stepping's error estimate of a frame: 'acceleration' = "
-        "Zienkiewicz-Xie's h^2/12 |a_(k+1) - a_k| over the frame's substeps, filtered through "
+        "Zienkiewicz-Xie's h^2/12 |a_(k+1) - a_k| over the frame's substeps (between "
+        "substep-centred accelerations, blind to stiff modes' Nyquist ringing), filtered through "
         "the step's matrix and including the driven nodes' path between the substeps (one "
         "more solve per frame); 'doubling' = the frame also computed in half the substeps "
         "from the same state, |d_2n - d_n| / 3 (Richardson; half again as many solves and a "
