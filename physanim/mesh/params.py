@@ -211,6 +211,12 @@ class TetraParams(BaseModel):
         "are labelled skin (bone) nodes (dimensionless).",
     )
 
+    @property
+    def ftetwild_edge_length_m(self) -> float:
+        """fTetWild's global target edge length, m: the coarsest its sizing field asks for
+        (``outside_edge_length_m``; ``edge_length_m`` when that is null)."""
+        return max(self.edge_length_m, self.outside_edge_length_m or 0.0)
+
 
 class MaterialsParams(BaseModel):
     """Facial-region geometry (the ``materials`` stage); values come from a materials file."""

@@ -183,7 +183,7 @@ def sizing_field(
     end; for a thin curved shell such as the face's tissue most of its work went into tets
     it then discarded (measured: about 85 %). A coarse target outside halves its time."""
     h = params.edge_length_m
-    far = max(h, params.outside_edge_length_m or 0.0)
+    far = params.ftetwild_edge_length_m
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     # fTetWild's box extends 1/15 of the largest extent beyond the surface; a point outside
     # the background mesh would get its global (coarse) length
@@ -218,7 +218,7 @@ def tetrahedralize_surface(
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int32)
     sizing: dict[str, np.ndarray] = {}
-    if max(params.edge_length_m, params.outside_edge_length_m or 0.0) > params.edge_length_m:
+    if params.ftetwild_edge_length_m > params.edge_length_m:
         bg_vertices, bg_tets, bg_values = sizing_field(vertices, faces, params)
         sizing = {"bg_vertices": bg_vertices, "bg_tets": bg_tets, "bg_values": bg_values}
     runs: list[tuple[TetMesh, TetQuality]] = []
@@ -249,7 +249,7 @@ def _ftetwild(
     nodes, tets = pytetwild.tetrahedralize(
         vertices,
         faces,
-        edge_length_abs=max(params.edge_length_m, params.outside_edge_length_m or 0.0),
+        edge_length_abs=params.ftetwild_edge_length_m,
         epsilon=params.epsilon_rel,
         optimize=params.optimize,
         stop_energy=params.stop_energy,

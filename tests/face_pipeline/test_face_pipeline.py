@@ -185,8 +185,8 @@ def test_regional_models_act_where_they_are_edited(model_sweep) -> None:
     assert peak["model3"]["right"] / peak["model2"]["right"] - 1.0 >= 0.02
 
     keys = variants["model2"]
-    nodes = store.open("tetra", keys["tetra"])["nodes"][:]
-    tets = store.open("tetra", keys["tetra"])["tets"][:]
+    mesh = store.open("tetra", keys["tetra"])
+    nodes, tets = mesh["nodes"][:], mesh["tets"][:]
     materials = store.open("materials", keys["materials"])
     label = name_index(list(materials.attrs["region_names"]), ["cphs_R"])[0]
     sim = {m: store.open("simulate", variants[m]["simulate"]) for m in ("model2", "model3")}
