@@ -21,7 +21,7 @@ from physanim.fem.kinematics import kinematics
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel, build_model
 from physanim.fem.monitors import EnergyMonitor, InversionMonitor, StressMonitor
-from physanim.fem.numba_threads import faster_thread_count, keeps_thread_count
+from physanim.fem.numba_threads import ThreadTrials, faster_thread_count, keeps_thread_count
 from physanim.fem.parallel_spmv import ParallelCSR
 from physanim.fem.params import SimulateParams
 from physanim.fem.stepping import FrameStepper, IntegratorCache, initial_state, substep_levels
@@ -101,7 +101,7 @@ def simulate(
     element formulation: ``build_model(..., law=..., element=...)``).
 
     On cores busy with other processes one thread can beat all of numba's: the run uses the
-    faster (checked before factorising and every 30 frames; ``SimResult.solver_threads``).
+    faster (checked before factorising, then on one frame in 30: ``SimResult.solver_threads``).
     """
     params = params or SimulateParams()
     t0 = time.perf_counter()
@@ -147,16 +147,16 @@ def simulate(
     record(0, 0.0)
     t0 = time.perf_counter()
     threads = np.zeros(n_frames, dtype=np.int64)
-    probe = np.ones(len(integ.free))
+    trials = ThreadTrials(most_threads)
     # numpy's BLAS threads, once woken by a per-frame product, spin on the cores that the
     # solver's threads need (measured 30 % slower steps on two cores): keep BLAS on one
     with threadpool_limits(limits=1, user_api="blas"):
         for k in range(1, n_frames):
-            if k % 30 == 1:  # other processes come and go: re-check every 30 frames
-                solve = stepper.current().solve
-                faster_thread_count(lambda: solve(probe), most_threads)  # noqa: B023
-            threads[k] = numba.get_num_threads()
+            threads[k] = trials.start(k)
+            t_frame, checks = time.perf_counter(), stepper.check_steps
             record(k, stepper.frame(state, k))
+            solves = stepper.substeps[k] + stepper.check_steps - checks + stepper.adaptive
+            trials.finish(time.perf_counter() - t_frame, solves)
             if progress is not None:
                 progress(k, n_frames - 1)
     t_step = time.perf_counter() - t0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -11,6 +12,7 @@ from physanim.fem.geometry import node_dofs
 from physanim.fem.linsolve import CholmodFactors, factorize, factorize_split, has_cholmod
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
+from physanim.fem.numba_threads import ThreadTrials, keeps_thread_count
 from physanim.fem.parallel_ldl import ParallelLDL
 from physanim.fem.parallel_spmv import ParallelCSR, SymmetricQuadraticForm
 from physanim.fem.params import SimulateParams
@@ -147,3 +149,61 @@ def test_common_pattern_combines_matrices_exactly(nested):
     expected = big + 3.0 * small - 0.5 * third
     np.testing.assert_allclose(combined.toarray(), expected.toarray(), rtol=0, atol=1e-12)
     assert pattern.has_sorted_indices
+
+
+@pytest.mark.parametrize("n_threads", [1, 2])
+def test_cholesky_factors_solve_postordered_or_not(n_threads):
+    """A Cholesky factor is packed straight from its CSC arrays when its elimination tree is
+    postordered (CHOLMOD's) and through the general path when not; its refills solve their
+    own matrices whichever way they are given (L L^T, or unit L with D)."""
+    rng = np.random.default_rng(7)
+    # tree 0 -> 2 -> 3, 1 -> 3: node 1 sits inside the subtree range of 2 (not postordered)
+    unordered = np.array([[4.0, 0, 1, 0], [0, 3.0, 0, 1], [1, 0, 5.0, 1], [0, 1, 1, 6.0]])
+    ordered = np.array([[4.0, 1, 0, 1], [1, 5.0, 0, 0], [0, 0, 3.0, 1], [1, 0, 1, 6.0]])
+    perm = np.array([2, 0, 3, 1])  # (P b)[i] = b[perm[i]]; A_orig = P^T A P
+    for A, postordered in ((ordered, True), (unordered, False)):
+        solver = None
+        for scale in (1.0, 2.0, 3.0):  # same pattern, new values
+            As = A + scale * np.diag(rng.uniform(1, 2, 4))
+            L = sp.csc_matrix(np.linalg.cholesky(As))
+            A_orig = np.zeros_like(As)
+            A_orig[np.ix_(perm, perm)] = As
+            if solver is None:
+                solver = ParallelLDL.from_cholesky(L, perm, n_threads)
+                assert (solver._q is None) == postordered
+            elif scale == 2.0:
+                solver = solver.refilled_cholesky(L)
+            else:
+                d = L.diagonal()
+                solver = solver.refilled(sp.csc_matrix(L / d), d**2)
+            b = rng.normal(size=4)
+            np.testing.assert_allclose(A_orig @ solver(b), b, rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs 2 numba threads")
+def test_thread_trials_switch_only_when_the_other_count_was_faster():
+    """Every 30th frame runs on the other thread count; the run moves to it when that frame
+    was faster per solve than 0.9 x the recent median, and moves back the same way."""
+
+    @keeps_thread_count
+    def run(seconds_by_threads: dict[int, float], sizes: dict[int, float]) -> list[int]:
+        numba.set_num_threads(2)
+        trials, used = ThreadTrials(most=2), []
+        for k in range(1, 91):
+            threads = trials.start(k)
+            used.append(threads)
+            size = sizes.get(k, 1.0)
+            trials.finish(seconds_by_threads[threads] * size, size)
+        return used
+
+    # cores free: one thread is slower, the trials at frames 30, 60, 90 change nothing
+    used = run({2: 1.0, 1: 1.6}, {})
+    assert [k for k, t in enumerate(used, 1) if t == 1] == [30, 60, 90]
+    # cores busy: one thread wins at frame 30 and keeps winning; two are tried at 60 and 90
+    used = run({2: 3.0, 1: 1.0}, {})
+    assert used[:29] == [2] * 29 and used[29:59] == [1] * 30 and used[59] == 2
+    assert used[89] == 2 and set(used[60:89]) == {1}
+    # a trial frame with twice the solves is judged per solve: 1.6 s for 2 solves wins
+    used = run({2: 1.0, 1: 0.8}, {30: 2.0})
+    assert used[30:59] == [1] * 29
+    assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
