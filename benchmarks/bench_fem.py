@@ -32,7 +32,7 @@ from physanim.fem.linsolve import CholmodFactors, blas_in_use
 from physanim.fem.model import build_model
 from physanim.fem.newmark import Newmark, State
 from physanim.fem.params import SimulateParams
-from physanim.fem.simulate import simulate
+from physanim.fem.simulate import frames_per_thread_count, simulate
 from physanim.pipeline import stage_inputs
 from physanim.pipeline.progress import rich_progress
 from physanim.pipeline.spec import dataset_overrides
@@ -81,7 +81,7 @@ def compare_stepping(sim: dict[str, Any], params: SimulateStageParams, repeats: 
     ]
     print(
         f"\n{'simulate on the demo (3 s)':40s} {'wall s':>7s} {'runs s':>18s} {'steps':>6s} "
-        f"{'check':>6s} {'factor s':>8s} {'threads':>7s} {'err % peak':>10s} {'err mm':>7s}"
+        f"{'check':>6s} {'factor s':>8s} {'threads:frames':>14s} {'err % peak':>10s} {'err mm':>7s}"
     )
     for name, update in rows:
         walls, res = [], None
@@ -90,12 +90,13 @@ def compare_stepping(sim: dict[str, Any], params: SimulateStageParams, repeats: 
             res = simulate(**sim, params=params.model_copy(update=update))
             walls.append(time.perf_counter() - t0)
         err = np.linalg.norm(res.displacements - ref, axis=2).max()
-        threads = "/".join(str(t) for t in sorted(set(res.solver_threads[1:])))
+        per_count = frames_per_thread_count(res.solver_threads).items()
+        threads = " ".join(f"{n}:{k}" for n, k in per_count)  # threads: frames
         runs = ", ".join(f"{w:.1f}" for w in walls)
         print(
             f"{name:40s} {statistics.median(walls):7.2f} {runs:>18s} "
             f"{res.frame_substeps.sum():6d} {res.check_steps:6d} "
-            f"{res.timings['factorization']:8.2f} {threads:>7s} {100 * err / peak:10.3f} "
+            f"{res.timings['factorization']:8.2f} {threads:>14s} {100 * err / peak:10.3f} "
             f"{err * 1e3:7.4f}"
         )
     print(f"(peak displacement {peak * 1e3:.2f} mm; err: largest node distance to the reference)")

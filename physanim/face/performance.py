@@ -80,7 +80,7 @@ def performance_summary(
     stepping, solver, drive (``mode``, landmarks, share of the ``n_skin`` skin nodes held by
     springs), peak displacement and stress, inverted tets, timings, the jaw, warnings."""
     from physanim.fem.linsolve import blas_in_use
-    from physanim.fem.simulate import hot_spot_ratio
+    from physanim.fem.simulate import frames_per_thread_count, hot_spot_ratio
 
     springs = drive.springs
     summary: dict[str, Any] = {
@@ -92,7 +92,7 @@ def performance_summary(
         "check_steps": result.check_steps,
         "frames_over_tolerance": result.frames_over_tolerance,
         "blas": blas_in_use(),
-        "solver_threads": sorted({int(t) for t in result.solver_threads[1:]}),
+        "solver_threads": frames_per_thread_count(result.solver_threads),
         "drive": mode,
         "driving_landmarks": len(drive.landmarks),
         "spring_node_fraction_of_skin": round(len(springs.nodes) / n_skin, 4) if springs else 0,

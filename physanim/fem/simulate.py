@@ -8,6 +8,7 @@ monitors (:mod:`.monitors`).
 
 from __future__ import annotations
 
+import collections
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -62,6 +63,13 @@ class SimResult:
     solver_threads: np.ndarray | None = None
     check_steps: int = 0
     frames_over_tolerance: int = 0
+
+
+def frames_per_thread_count(solver_threads: np.ndarray) -> dict[str, int]:
+    """{numba threads: frames stepped on them} of a run's ``solver_threads`` (T,), most used
+    first (frame 0, the initial state, is not stepped)."""
+    counts = collections.Counter(int(t) for t in solver_threads[1:])
+    return {str(n): k for n, k in counts.most_common()}
 
 
 def hot_spot_ratio(result: SimResult, min_fraction: float = 0.05) -> float:
