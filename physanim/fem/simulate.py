@@ -42,7 +42,7 @@ class SimResult:
     coarse half of each step-doubling pair, rejected frames); frames_over_tolerance: frames
     whose error estimate stayed above the tolerance at the smallest step allowed;
     solver_threads (T,) numba threads used for each frame (all, or 1 when that was faster:
-    cores busy with other processes);
+    cores busy with other processes; one frame in 30 tries the other count);
     timings: seconds spent in 'assembly', 'factorization', 'stepping'.
     """
 
