@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+import physanim.fem.numba_threads  # noqa: F401  (threading layer, before the parallel kernel)
 
 
 def validate_mesh(nodes: np.ndarray, tets: np.ndarray) -> None:
@@ -31,9 +33,9 @@ def signed_volumes(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 # compiled: it runs once per output frame, where the numpy version (gather nodes[tets], then
 # np.linalg.det, an LU per tet) took ~5 ms on the demo mesh
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _signed_volumes(nodes, tets, out):
-    for e in range(tets.shape[0]):
+    for e in prange(tets.shape[0]):
         i, j, k, m = tets[e, 0], tets[e, 1], tets[e, 2], tets[e, 3]
         x, y, z = nodes[i, 0], nodes[i, 1], nodes[i, 2]
         a0, a1, a2 = nodes[j, 0] - x, nodes[j, 1] - y, nodes[j, 2] - z
