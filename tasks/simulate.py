@@ -171,7 +171,7 @@ def compute(
 SPEC = StageSpec.typed(
     "simulate",
     compute,
-    version="6",
+    version="7",
     doc="viscoelastic FEM (Newmark); skull fixed, mandible turned by the estimated jaw, skin "
     "pulled by the tracked landmarks",
 )
