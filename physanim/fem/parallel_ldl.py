@@ -503,7 +503,7 @@ class ParallelLDL:
     def refilled_cholesky(self, L: sp.csc_matrix) -> ParallelLDL:
         """``refilled`` for a Cholesky factor with the pattern of the one this solver was made
         from by ``from_cholesky``: one compiled pass packs the blocks."""
-        if self._packing[1] != 1 or not self._same_pattern(L):
+        if not self._diagonal_first or not self._same_pattern(L):
             return self.refilled(*_unit_lower(sp.csc_matrix(L)))
         out = copy.copy(self)
         out._pack(L.data, cholesky=True)
@@ -517,7 +517,7 @@ class ParallelLDL:
             raise ValueError("refilled: L must have the CSC pattern of the original factor")
         d = np.asarray(d, dtype=np.float64)
         out = copy.copy(self)
-        if self._packing[1] == 1:  # made by from_cholesky: L holds its (unit) diagonal first
+        if self._diagonal_first:  # L holds its (unit) diagonal first in each column
             out.dinv = 1.0 / d
             out._pack(L.data, cholesky=False)
             return out
@@ -531,6 +531,12 @@ class ParallelLDL:
         out.dinv = 1.0 / d
         out._pack(Ls.data, cholesky=False)
         return out
+
+    @property
+    def _diagonal_first(self) -> bool:
+        """Whether the blocks were laid out from a factor holding its diagonal first in each
+        column (``from_cholesky``'s direct path), not from its strictly lower part."""
+        return self._packing[1] == 1
 
     def _same_pattern(self, L: sp.spmatrix) -> bool:
         """Whether L is CSC with the pattern of the factor this solver was made from."""
