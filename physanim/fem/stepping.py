@@ -136,10 +136,6 @@ class FrameStepper:
     def adaptive(self) -> bool:
         return len(self.levels) > 1
 
-    def current(self) -> Newmark:
-        """The integrator of the current level's substeps."""
-        return self.integrators.get(self.levels[self.level])
-
     def _drive(self, k: int, n_sub: int) -> tuple[np.ndarray, ...]:
         """The times (n_sub,) s of the substeps from frame k - 1 to frame k, the prescribed
         d, v, a (n_sub, n_c) and spring forces (n_sub, n_free) or None at them."""
