@@ -2,11 +2,7 @@
 
 Outputs the scan cut along the lip seam (so the lips can part), the mouth line, the motion
 mesh in the scan frame, the binding of every scan vertex (never across the seam) and the
-kinematic shape-motion model (:class:`AlignOutput`).
-
-Version 3: ``fps`` is no longer copied into this output (read it from ``track``).
-Version 4: the scan is prepared by the ``scan`` stage (its settings moved there), which runs
-while the capture is ingested and tracked.
+kinematic shape-motion model (:class:`AlignOutput`). Version history: CHANGELOG.md.
 """
 
 from __future__ import annotations

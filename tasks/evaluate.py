@@ -1,11 +1,7 @@
 """Stage ``evaluate``: symmetry cost, mouth-corner curves, lag, and how well the simulated face
 performs the capture (``physanim.evaluate.face``), against the dataset's ground truth if any.
 
-Version 5: the output is declared by ``FaceEvaluation`` (the landmark names are align's, no
-longer copied here; ``peak_frames`` stored; absent truth measures are null attributes).
-Version 6: the truth comparison's closest points come from Open3D's BVH search
-(``evaluate.closest_points``, issue #20): the same figures within 1e-6, the stored arrays
-differ in the last digits.
+Version history: CHANGELOG.md.
 """
 
 from __future__ import annotations

@@ -3,11 +3,8 @@
 Per frame: the captured colour frame with the tracked landmarks, the CANDIDE-style fit, the
 kinematic (bound) scan and the FEM skin coloured by displacement, in one panel
 (``physanim.render.face_panel``); PNG frames, an MP4 at the capture frame rate and matplotlib
-plots (``physanim.render.plots.plot_face_run``), all in this output's files/.
-
-Version 5: panels kept as PNG only at the evaluated peak frames by default
-(``render.png_frames``), the plots drawn while the tiles render.
-Version 6: the fit and kinematic tiles come from the ``tiles`` stage.
+plots (``physanim.render.plots.plot_face_run``), all in this output's files/. The fit and
+kinematic tiles come from the ``tiles`` stage. Version history: CHANGELOG.md.
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
 """Stage ``tetra``: closed soft-tissue volume behind the skin, fTetWild tets, node labels.
 
-Version 3: the landmark names are no longer copied here (``landmark_node`` follows align's
-``landmark_names``).
+Version history: CHANGELOG.md.
 """
 
 from __future__ import annotations
