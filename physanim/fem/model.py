@@ -11,7 +11,7 @@ from numba import njit, prange
 from physanim.fem.assembly import assemble, element_blocks, mass_matrix, strain_displacement
 from physanim.fem.elements import ELEMENTS, Element
 from physanim.fem.geometry import element_dofs, shape_gradients
-from physanim.fem.laws import KelvinVoigt, MaterialLaw
+from physanim.fem.laws import MaterialLaw
 from physanim.fem.materials import TetMaterials
 from physanim.fem.params import SimulateParams
 
@@ -97,16 +97,16 @@ def build_model(
 ) -> FemModel:
     """Assemble K, M, C of a tet mesh (nodes (N, 3) m, tets (M, 4) positively oriented).
 
-    ``law`` (default ``KelvinVoigt(params.viscosity)``) and ``element`` (default
-    ``ELEMENTS[params.formulation]``) may be any :class:`MaterialLaw` / :class:`Element`.
+    ``law`` (default ``params.law``) and ``element`` (default ``ELEMENTS[params.formulation]``)
+    may be any :class:`MaterialLaw` / :class:`Element`.
     """
     params = params or SimulateParams()
-    law = law or KelvinVoigt(params.viscosity)
+    law = law or params.law
     element = element or ELEMENTS[params.formulation]
     nodes = np.asarray(nodes, dtype=np.float64)
     tets = np.asarray(tets)
     grads, vol = shape_gradients(nodes, tets)
-    mat = materials.validated(len(tets))
+    mat = materials.validated(len(tets), law.tet_fields)
     n = len(nodes)
     B = strain_displacement(grads)
     mu, kappa = law.moduli(mat)

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, SerializeAsAny, field_validator, model_validator
+
+from physanim.fem.laws import KelvinVoigt, MaterialLaw, law_from_config
 
 
 class SimulateParams(BaseModel):
@@ -66,11 +68,11 @@ class SimulateParams(BaseModel):
     mass: Literal["consistent", "lumped"] = Field(
         "consistent", description="Mass matrix: consistent (rho int N^T N dV) or row-sum lumped"
     )
-    viscosity: Literal["isotropic", "seed"] = Field(
-        "isotropic",
-        description="Kelvin-Voigt viscosity matrix C' (Pa s): 'isotropic' = 2 eta dev(strain "
-        "rate), rotation invariant; 'seed' = SPEC eq 4.26 literally, whose normal block is half "
-        "the isotropic one (same shear viscosity eta)",
+    law: SerializeAsAny[MaterialLaw] = Field(
+        default_factory=KelvinVoigt,
+        description="constitutive law and its settings: {name: <registered law>, ...}; "
+        "'kelvin_voigt' (default) reads E, nu, eta, rho per tet "
+        "(physanim.fem.laws: LAWS lists the registered laws)",
     )
     corotational: bool = Field(
         False, description="Corotational (stiffness-warping) elasticity for large rotations"
@@ -96,3 +98,18 @@ class SimulateParams(BaseModel):
     corot_max_iter: int = Field(
         100, ge=1, le=10_000, description="Iteration cap of the corotational PCG solve"
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _viscosity_moved(cls, data: object) -> object:
+        if isinstance(data, dict) and "viscosity" in data:
+            raise ValueError(
+                "simulate.viscosity moved to the law's settings: law: {name: kelvin_voigt, "
+                f"viscosity_form: {data['viscosity']}}}"
+            )
+        return data
+
+    @field_validator("law", mode="before")
+    @classmethod
+    def _registered_law(cls, value: object) -> MaterialLaw:
+        return law_from_config(value)

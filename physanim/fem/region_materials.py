@@ -21,6 +21,25 @@ def material_table(model: MaterialModel) -> np.ndarray:
     return np.asarray(rows)
 
 
+def extra_table(model: MaterialModel) -> dict[str, np.ndarray]:
+    """The law-declared fields beyond E, nu, eta, rho: name -> (1 + len(REGION_NAMES),) SI
+    values per region label (row 0 default). A region that omits a field takes the default's
+    value; a field no default gives is an error naming the region."""
+    default = model.default.extra_fields
+    for region, values in model.regions.items():
+        unknown = sorted(set(values.extra_fields) - set(default))
+        if unknown:
+            raise ValueError(
+                f"materials file '{model.name}': region {region} gives {unknown}, which the "
+                "default section lacks; give them under 'default' too"
+            )
+    regions = [model.regions.get(n, model.default) for n in REGION_NAMES]
+    return {
+        field: np.array([value, *(r.extra_fields.get(field, value) for r in regions)])
+        for field, value in default.items()
+    }
+
+
 def tet_materials(tet_labels: np.ndarray, model: MaterialModel) -> TetMaterials:
     """Constants (m,) per tet from region labels (m,) (0 default, i+1 = REGION_NAMES[i])."""
     labels = np.asarray(tet_labels, dtype=np.int64)
@@ -30,4 +49,7 @@ def tet_materials(tet_labels: np.ndarray, model: MaterialModel) -> TetMaterials:
             f"tet_labels must lie in [0, {len(table)}), got [{labels.min()}, {labels.max()}]"
         )
     values = table[labels]
-    return TetMaterials(E=values[:, 0], nu=values[:, 1], eta=values[:, 2], rho=values[:, 3])
+    extra = {name: column[labels] for name, column in extra_table(model).items()}
+    return TetMaterials(
+        E=values[:, 0], nu=values[:, 1], eta=values[:, 2], rho=values[:, 3], extra=extra
+    )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -250,14 +251,30 @@ class MaterialsParams(BaseModel):
 
 
 class TissueMaterial(BaseModel):
-    """Linear viscoelastic (Kelvin-Voigt) tissue constants of one region."""
+    """Linear viscoelastic (Kelvin-Voigt) tissue constants of one region, plus any further
+    per-tet field a material law declares (``simulate.law``), named with its SI unit
+    (``beta_s: 0.001``) and given as a number."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="allow")
 
     E_kPa: float = Field(gt=0.0, le=1e5, description="Young's modulus, kPa.")
     nu: float = Field(ge=0.0, lt=0.5, description="Poisson's ratio (dimensionless).")
     eta_Pa_s: float = Field(ge=0.0, le=1e6, description="Viscosity, Pa*s.")
     rho_kg_m3: float = Field(gt=0.0, le=1e4, description="Density, kg/m^3.")
+
+    @model_validator(mode="after")
+    def _extra_fields_are_numbers(self) -> TissueMaterial:
+        for name, value in (self.model_extra or {}).items():
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ValueError(f"field {name!r} must be a number (SI units), got {value!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"field {name!r} must be finite, got {value!r}")
+        return self
+
+    @property
+    def extra_fields(self) -> dict[str, float]:
+        """The law-declared fields beyond E, nu, eta, rho: name -> value (SI)."""
+        return {k: float(v) for k, v in (self.model_extra or {}).items()}
 
 
 class MaterialModel(BaseModel):
@@ -282,3 +299,12 @@ class MaterialModel(BaseModel):
                 f"use names among {list(REGION_NAMES)}"
             )
         return self
+
+
+#: The seed's uniform model (SPEC section 1, item 6), used when no materials file is merged.
+UNIFORM = MaterialModel(
+    name="uniform",
+    description="Seed 004 uniform model",
+    default=TissueMaterial(E_kPa=192.4, nu=0.495, eta_Pa_s=476.8, rho_kg_m3=1100.0),
+    regions={},
+)

@@ -5,6 +5,7 @@ import pytest
 from fem_meshes import box_mesh, cylinder_sector, lame_cylinder_ur
 
 from physanim.fem.geometry import node_dofs, signed_volumes
+from physanim.fem.laws import KelvinVoigt
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.params import SimulateParams
@@ -124,7 +125,7 @@ def _rotation(axis, angle):
 def test_viscous_damping_is_deviatoric(viscosity):
     nodes, tets = box_mesh((2, 2, 2), (0.01, 0.01, 0.01))
     eta = 400.0
-    params = SimulateParams(viscosity=viscosity)
+    params = SimulateParams(law=KelvinVoigt(viscosity_form=viscosity))
     model = build_model(nodes, tets, TetMaterials.uniform(len(tets), eta=eta), params)
     dilation = (nodes * 1e-2).ravel()
     assert np.abs(model.C @ dilation).max() < 1e-12
@@ -146,7 +147,7 @@ def test_isotropic_viscosity_is_rotation_invariant_seed_is_not():
     for visc in ("isotropic", "seed"):
         p = []
         for R in (np.eye(3), Q):
-            model = build_model(nodes @ R.T, tets, mat, SimulateParams(viscosity=visc))
+            model = build_model(nodes @ R.T, tets, mat, law=KelvinVoigt(viscosity_form=visc))
             v = (stretch @ R.T).ravel()  # the same flow, rotated with the body
             p.append(v @ model.C @ v)
         powers[visc] = p
