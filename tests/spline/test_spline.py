@@ -5,6 +5,14 @@ from scipy.integrate import quad
 from physanim.spline import natural_spline, path_positions, sample, uniform_parameter
 from physanim.spline.cubic import AdaptiveIntegral
 from physanim.spline.demo import cos_rule, figure_eight_points, figure_eight_spline, plot_demo
+from tests.render.plot_content import (
+    assert_not_blank,
+    capture_figures,
+    colour_pixels,
+    curve_drawn,
+    read_rgb,
+    to_pixels,
+)
 
 
 def _arc(sp, a, b):
@@ -140,7 +148,36 @@ def test_bad_input_messages():
         natural_spline(np.zeros((5, 4)))
 
 
-def test_plot_demo_writes_figures(tmp_path):
+def test_plot_demo_writes_figures(tmp_path, monkeypatch):
+    """Each figure shows what it should, where it should: the curvature proxy along the arc
+    length, the data points and each sampling's points, read back from the PNGs."""
+    saved = capture_figures(monkeypatch)
     paths = plot_demo(tmp_path)
     assert set(paths) == {"fig1", "fig3", "fig4", "fig5", "fig6"}
-    assert all(p.stat().st_size > 5000 for p in paths.values())
+    figs = {p.name: f for f, p in saved}
+    sp = figure_eight_spline()
+    for key, path in paths.items():
+        img = read_rgb(path)
+        assert_not_blank(img)
+        fig = figs[path.name]
+        ax = fig.axes[0]
+        if key == "fig1":  # K = |P''| by finite differences, arc length by QUADPACK
+            t = np.linspace(0.02, sp.t_end - 0.02, 60)
+            h = 1e-4
+            k = np.linalg.norm(sp(t + h) - 2 * sp(t) + sp(t - h), axis=1) / h**2
+            s = np.cumsum([0.0] + [_arc(sp, a, b) for a, b in zip(t[:-1], t[1:], strict=True)])
+            s += _arc(sp, 0.0, t[0])
+            assert curve_drawn(img, fig, ax, s, k, ax.get_lines()[0].get_color()) > 0.95
+            continue
+        pts = {
+            "fig3": figure_eight_points(),
+            "fig4": sample(sp, "arc", 41)[0],
+            "fig5": sample(sp, "curvature", 41)[0],
+            "fig6": sample(sp, cos_rule())[0],
+        }[key]
+        assert curve_drawn(img, fig, ax, pts[:, 0], pts[:, 1], "k", radius_px=3) == 1.0, key
+        # and no marker where there is no point: the curve's centre of the right-hand loop
+        rows, cols = to_pixels(img, fig, ax, [0.7], [0.0])
+        assert not colour_pixels(img, "k")[
+            rows[0] - 3 : rows[0] + 4, cols[0] - 3 : cols[0] + 4
+        ].any()
