@@ -14,6 +14,14 @@ from physanim.render.sweep_report import (
     varying_stages,
     write_sweep_report,
 )
+from tests.render.plot_content import (
+    assert_not_blank,
+    capture_figures,
+    colour_pixels,
+    curve_drawn,
+    read_rgb,
+    to_pixels,
+)
 
 
 def _variant(name: str, sim_key: str, peak: float, files: dict[str, Path]) -> SweepVariant:
@@ -51,7 +59,8 @@ def test_only_differing_stages_and_measures_are_shown(tmp_path: Path) -> None:
     }
 
 
-def test_report_has_each_variants_media_and_a_timeline(tmp_path: Path) -> None:
+def test_report_has_each_variants_media_and_a_timeline(tmp_path: Path, monkeypatch) -> None:
+    saved = capture_figures(monkeypatch)
     variants = []
     for name in ("model1", "model2"):
         folder = tmp_path / name / "files"
@@ -79,4 +88,16 @@ def test_report_has_each_variants_media_and_a_timeline(tmp_path: Path) -> None:
     for name in ("model1", "model2"):
         assert f"src='../{name}/files/panel.mp4'" in page
         assert "notes.txt" not in page
-    assert (out / "timeline.png").stat().st_size > 1000
+    # the timeline: a bar per stage run, on its worker's lane, over its time span, coloured by
+    # stage (tetra C0, simulate C1); nothing where no stage ran
+    img = read_rgb(out / "timeline.png")
+    assert_not_blank(img)
+    fig = next(f for f, p in saved if p.name == "timeline.png")
+    ax = fig.axes[0]
+    for colour, lane, times in (("C0", 0, [1.0, 2.5, 3.5]), ("C1", 0, [6.0, 7.5, 9.5])):
+        assert curve_drawn(img, fig, ax, times, [lane] * 3, colour, radius_px=1) == 1.0
+    assert curve_drawn(img, fig, ax, [5.5, 7.5, 9.0], [1] * 3, "C1", radius_px=1) == 1.0
+    for x, lane in ((2.0, 1), (10.5, 0), (10.2, 1)):  # worker 2 idle at 2 s; all done by 10.2 s
+        rows, cols = to_pixels(img, fig, ax, [x], [lane])
+        box = img[rows[0] - 2 : rows[0] + 3, cols[0] - 2 : cols[0] + 3]
+        assert not (colour_pixels(box, "C0") | colour_pixels(box, "C1")).any(), (x, lane)
