@@ -19,6 +19,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pinocchio as pin
+from results import Table, describe, record  # benchmarks/results.py, beside this script
 
 from physanim.dynamics import Figure, forward_dynamics, inverse_dynamics
 from physanim.dynamics.reference_models import mujoco_model, pinocchio_model
@@ -40,8 +41,9 @@ def _median_us(fn, block: int = 250, blocks: int = 40) -> float:
     return float(np.median(times)) * 1e6
 
 
-def _figure_row(name: str, rng: np.random.Generator) -> str:
-    """One table row: per-call times, the ratio to Pinocchio and the largest disagreement."""
+def _figure_row(name: str, rng: np.random.Generator) -> tuple[str, list]:
+    """One table row, printed and recorded: per-call times (us), the ratio to Pinocchio and the
+    largest disagreement."""
     fig = Figure.from_yaml(CONFIGS / f"{name}.yaml")
     q = rng.uniform(-0.5, 0.5, fig.n_dof)
     qd, tau = rng.normal(size=fig.n_dof), rng.normal(size=fig.n_dof)
@@ -66,11 +68,14 @@ def _figure_row(name: str, rng: np.random.Generator) -> str:
     }
     ratio = t["aba"] / t["pin"]
     verdict = "ok" if ratio <= TARGET[name] else "MISSED"
-    return (
+    cells = [name, fig.n_dof, *(t[k] for k in ("aba", "crba", "rnea", "pin", "mj"))]
+    cells += [ratio, TARGET[name], err, verdict]
+    text = (
         f"{name:8s} {fig.n_dof:3d} {t['aba']:6.2f}us {t['crba']:6.2f}us {t['rnea']:6.2f}us "
         f"{t['pin']:8.2f}us {t['mj']:6.2f}us {ratio:7.2f}x {TARGET[name]:5.0f}x "
         f"{err:11.2e} {verdict}"
     )
+    return text, cells
 
 
 def main() -> None:
@@ -79,8 +84,11 @@ def main() -> None:
         f"{'figure':8s} {'DOF':>3s} {'ABA':>8s} {'CRBA':>8s} {'seed':>8s} "
         f"{'Pinocchio':>10s} {'MuJoCo':>8s} {'ABA/pin':>8s} {'target':>7s} {'max |dqdd|':>11s}"
     )
+    rows = []
     for name in ("arm2", "human30"):
-        print(_figure_row(name, rng))
+        text, cells = _figure_row(name, rng)
+        print(text)
+        rows.append(cells)
     # batched inverse dynamics over a trajectory (one call) against a Pinocchio loop
     fig = Figure.from_yaml(CONFIGS / "human30.yaml")
     pm = pinocchio_model(fig)
@@ -95,6 +103,24 @@ def main() -> None:
     print(
         f"inverse dynamics, 1000 poses of human30: physanim {t_ours / 1e3:.2f} ms (one call), "
         f"Pinocchio rnea loop {t_pin / 1e3:.2f} ms"
+    )
+    columns = ["figure", "dof", "aba_us", "crba_us", "seed_us", "pinocchio_us", "mujoco_us"]
+    columns += ["aba_over_pinocchio", "target", "max_abs_dqdd_rad_s2", "verdict"]
+    batched = [["physanim, one call", t_ours / 1e3], ["Pinocchio rnea loop", t_pin / 1e3]]
+    record(
+        "bench_dynamics",
+        [
+            Table("forward dynamics per call (medians of 40 x 250 calls)", columns, rows),
+            Table(
+                "batched inverse dynamics, 1000 poses of human30", ["implementation", "ms"], batched
+            ),
+        ],
+        **describe(__doc__, "bench_dynamics"),
+        headline={
+            "human30_aba_us": rows[1][2],
+            "human30_ratio": rows[1][7],
+            "arm2_ratio": rows[0][7],
+        },
     )
 
 

@@ -24,6 +24,8 @@ import sys
 import time
 from pathlib import Path
 
+from results import Table, describe, record  # benchmarks/results.py, beside this script
+
 ROOT = Path(__file__).resolve().parents[1]
 EDIT = ["-c", "configs/models/model2.yaml"]
 STAGES = ("materials", "simulate", "evaluate", "render")
@@ -69,12 +71,28 @@ def main() -> None:
             print(f"{mode:32s} run {i + 1}: {wall:5.1f} s wall ({shown})", flush=True)
     print(f"\n{'material edit (medians of ' + str(args.repeats) + ')':32s} {'wall s':>7s}", end="")
     print("".join(f" {s:>9s}" for s in STAGES), f" {'the rest':>8s}")
+    rows = []
     for mode, runs in results.items():
         wall = statistics.median(w for w, _ in runs)
         per = [statistics.median(st.get(s, 0.0) for _, st in runs) for s in STAGES]
         rest = wall - sum(per)
         print(f"{mode:32s} {wall:7.1f}" + "".join(f" {t:9.1f}" for t in per) + f" {rest:9.1f}")
+        rows.append([mode, wall, [w for w, _ in runs], *per, rest])
     subprocess.run(default, cwd=ROOT, check=True, capture_output=True)  # the latest again
+    columns = ["mode", "wall_s", "runs_s", *(f"{s}_s" for s in STAGES), "rest_s"]
+    record(
+        "bench_edit",
+        [
+            Table(
+                f"material edit (medians of {args.repeats})",
+                columns,
+                rows,
+                reference="the settings before issue #20's last round",
+            )
+        ],  # fmt: skip
+        **describe(__doc__, "bench_edit"),
+        headline={"edit_s": rows[0][1], "reference_s": rows[1][1]},
+    )
 
 
 if __name__ == "__main__":

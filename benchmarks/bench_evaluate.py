@@ -21,6 +21,7 @@ import time
 from typing import Any
 
 import numpy as np
+from results import Table, describe, record  # benchmarks/results.py, beside this script
 
 from flows.dags import FACE
 from physanim.config import load_config
@@ -100,6 +101,24 @@ def main() -> None:
     print(
         f"speed-up {speed_up:.1f}x; {len(rel)} summary figures ({len(undefined)} undefined in "
         f"both), max relative difference {rel[worst]:.2e} ({worst})"
+    )
+    record(
+        "bench_evaluate",
+        [
+            Table(
+                f"evaluate on the demo, medians of {args.repeats}",
+                ["path", "median_s"],
+                [[name, s] for name, s in seconds.items()],
+                notes=f"speed-up {speed_up:.1f}x; {len(rel)} summary figures ({len(undefined)} "
+                f"undefined in both), max relative difference {rel[worst]:.2e} ({worst})",
+            )
+        ],  # fmt: skip
+        **describe(__doc__, "bench_evaluate"),
+        headline={
+            "bvh_s": seconds[list(paths)[1]],
+            "grid_s": seconds[next(iter(paths))],
+            "max_rel_diff": rel[worst],
+        },  # fmt: skip
     )
 
 

@@ -23,6 +23,7 @@ from typing import Any
 import numba
 import numpy as np
 import scipy.sparse as sp
+from results import Table, describe, record  # benchmarks/results.py, beside this script
 from threadpoolctl import threadpool_limits
 
 from flows.dags import FACE
@@ -64,13 +65,16 @@ def time_steps(model, pres, dt, solver, n_steps):
     return t_fac, (time.perf_counter() - t0) / n_steps, nm
 
 
-def compare_stepping(sim: dict[str, Any], params: SimulateStageParams, repeats: int) -> None:
-    """The demo's simulate: reference, previous default and fast paths side by side."""
+def compare_stepping(sim: dict[str, Any], params: SimulateStageParams, repeats: int) -> Table:
+    """The demo's simulate: reference, previous default and fast paths side by side (the
+    printed table, returned for the results file: wall times in s, errors in % and mm)."""
     print(f"BLAS under CHOLMOD: {blas_in_use()}; numba threads: {numba.get_num_threads()}")
     t0 = time.perf_counter()
     ref_params = params.model_copy(update={"dt": 5e-4, "stepping": "fixed"})
     ref = simulate(**sim, params=ref_params).displacements.astype(np.float64)
-    print(f"reference: fixed dt = 0.5 ms, float64, in {time.perf_counter() - t0:.1f} s (once)")
+    t_ref = time.perf_counter() - t0
+    print(f"reference: fixed dt = 0.5 ms, float64, in {t_ref:.1f} s (once)")
+    recorded = [["reference: fixed dt = 0.5 ms, float64 (once)", t_ref, [t_ref], *[None] * 4, 0, 0]]
     peak = np.linalg.norm(ref, axis=2).max()
     rows = [
         ("fixed dt = 1 ms (first default)", {"stepping": "fixed"}),
@@ -99,10 +103,18 @@ def compare_stepping(sim: dict[str, Any], params: SimulateStageParams, repeats: 
             f"{res.timings['factorization']:8.2f} {threads:>14s} {100 * err / peak:10.3f} "
             f"{err * 1e3:7.4f}"
         )
+        recorded.append([name, statistics.median(walls), walls, int(res.frame_substeps.sum()),
+                         res.check_steps, res.timings["factorization"], threads,
+                         100 * err / peak, err * 1e3])  # fmt: skip
     print(f"(peak displacement {peak * 1e3:.2f} mm; err: largest node distance to the reference)")
+    columns = ["mode", "wall_s", "runs_s", "steps", "check_steps", "factorisation_s"]
+    columns += ["threads_frames", "error_pct_of_peak", "error_mm"]
+    return Table("simulate on the demo (3 s)", columns, recorded,
+                 notes=f"peak displacement {peak * 1e3:.2f} mm; BLAS under CHOLMOD: "
+                 f"{blas_in_use()}; numba threads: {numba.get_num_threads()}")  # fmt: skip
 
 
-def compare_factorizations(sim: dict[str, Any], repeats: int) -> None:
+def compare_factorizations(sim: dict[str, Any], repeats: int) -> Table:
     """Refactorising the demo's Newmark matrix (one frame per step) after the symbolic
     analysis, up to a ready solver: supernodal LL^T of A_uu (default, BLAS-3) and simplicial
     LDL^T of the sparser augmented matrix (the previous default)."""
@@ -117,6 +129,7 @@ def compare_factorizations(sim: dict[str, Any], repeats: int) -> None:
     print(
         f"\n{'CHOLMOD refactorisation, to a ready solver':44s} {'s (median)':>10s} {'L nnz':>10s}"
     )
+    recorded = []
     for name, mode, A in (
         ("supernodal LL^T of A_uu (default)", "supernodal", nm.A_uu),
         ("simplicial LDL^T of the augmented matrix", "simplicial", aug),
@@ -133,6 +146,9 @@ def compare_factorizations(sim: dict[str, Any], repeats: int) -> None:
             nnz = solver.vals.size + solver.tri.size // 2
             label = f"{name}, {threads} BLAS thread(s)"
             print(f"{label:44s} {statistics.median(times):10.3f} {nnz / 1e6:9.2f}M")
+            recorded.append([label, statistics.median(times), nnz / 1e6])
+    return Table("CHOLMOD refactorisation, to a ready solver", ["factorisation", "median_s",
+                 "factor_nnz_millions"], recorded)  # fmt: skip
 
 
 def main() -> None:
@@ -150,8 +166,9 @@ def main() -> None:
         f"{0 if springs is None else len(springs.nodes)} skin nodes on springs); "
         f"{len(traj)} frames at {1 / sim['frame_dt']:.0f} fps"
     )
-    compare_stepping(sim, params, args.repeats)
-    compare_factorizations(sim, args.repeats)
+    stepping = compare_stepping(sim, params, args.repeats)
+    factorisations = compare_factorizations(sim, args.repeats)
+    per_solver = []
     pres = node_dofs(driven)
     dt = params.dt
 
@@ -170,6 +187,7 @@ def main() -> None:
             print(
                 f"{name:34s} {t_asm:10.2f} {t_fac:9.2f} {1e3 * per_step:8.2f} {dt / per_step:6.2f}"
             )
+            per_solver.append([name, t_asm, t_fac, 1e3 * per_step, dt / per_step])
 
     res = simulate(**sim, params=params.model_copy(update={"stepping": "fixed"}))
     n_steps = (len(traj) - 1) * res.n_substeps
@@ -196,7 +214,43 @@ def main() -> None:
         f"corotational: {1e3 * res_c.timings['stepping'] / steps_c:.1f} ms/step over {steps_c} "
         f"steps, PCG iterations/step mean {res_c.corot_iterations.mean():.1f}"
     )
-    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"peak RSS {rss:.0f} MiB")
+    default = stepping.rows[-2]  # adaptive, float32 factor (default)
+    fixed_run = [
+        ["fixed steps: steps", n_steps, "count"],
+        ["fixed steps: time per step incl. per-frame outputs", 1e3 * per_step, "ms"],
+        ["fixed steps: assembly", tm["assembly"], "s"],
+        ["fixed steps: factorisation", tm["factorization"], "s"],
+        ["corotational: time per step", 1e3 * res_c.timings["stepping"] / steps_c, "ms"],
+        ["corotational: PCG iterations per step, mean", res_c.corot_iterations.mean(), "count"],
+        ["peak RSS", rss, "MiB"],
+    ]
+    record(
+        "bench_fem",
+        [
+            stepping,
+            factorisations,
+            Table(
+                "per solver, Newmark steps",
+                ["config", "assembly_s", "factor_s", "ms_per_step", "real_time_factor"],
+                per_solver,
+            ),  # fmt: skip
+            Table(
+                "demo simulate, fixed steps; corotational; memory",
+                ["figure", "value", "unit"],
+                fixed_run,
+            ),  # fmt: skip
+        ],
+        **describe(__doc__, "bench_fem"),
+        notes=f"demo mesh: {len(nodes)} nodes, {len(tets)} tets, {3 * len(nodes)} DOF",
+        headline={
+            "nodes": len(nodes),
+            "default_s": default[1],
+            "reference_s": stepping.rows[0][1],
+            "error_pct_of_peak": default[7],
+        },  # fmt: skip
+    )
 
 
 if __name__ == "__main__":

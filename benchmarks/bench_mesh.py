@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from results import Table, describe, record  # benchmarks/results.py, beside this script
 
 from physanim.capture.actor import build_actor
 from physanim.capture.markers import place_markers
@@ -40,6 +41,10 @@ from physanim.mesh.tissue import build_tissue_surface
 
 
 class Timer:
+    """Prints and keeps (``Timer.done``) the wall seconds of a block."""
+
+    done: list[list] = []
+
     def __init__(self, name: str) -> None:
         self.name = name
 
@@ -50,6 +55,7 @@ class Timer:
     def __exit__(self, *exc: object) -> None:
         self.s = time.perf_counter() - self.t0
         print(f"  {self.name:<42s} {self.s:8.2f} s")
+        Timer.done.append([self.name, self.s])
 
 
 def brute_force_distance(points: np.ndarray, v: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -169,6 +175,21 @@ def main() -> None:
     )
     png = plot_regions(v, f, skin_lab, out / "regions.png", lms)
     print(f"  regions render: {png}")
+    quality = [[k, v] for k, v in q.as_dict().items()]
+    times = dict(Timer.done)
+    record(
+        "bench_mesh",
+        [
+            Table("mesh stages at full size", ["step", "wall_s"], Timer.done),
+            Table("tet mesh quality (fTetWild)", ["figure", "value"], quality),
+        ],  # fmt: skip
+        **describe(__doc__, "bench_mesh"),
+        notes=f"skin {len(v)} vertices; tets: {len(mesh.nodes)} nodes, {len(mesh.tets)} tets",
+        headline={
+            "binding_s": times["bind_points (cKDTree candidates)"],
+            "ftetwild_s": times["tetrahedralize_surface (fTetWild)"],
+        },  # fmt: skip
+    )
 
 
 if __name__ == "__main__":

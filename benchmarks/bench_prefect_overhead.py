@@ -4,6 +4,8 @@ Prints wall times for: the local in-process runner, the first Prefect flow run (
 temporary API server with a fresh PREFECT_HOME), and a second flow run in the same process;
 then whole ``physanim run`` commands: ``--local``, the first Prefect run of a run directory
 (which starts its shared server) and the next ones (which reuse it), medians of 3.
+
+Run: .venv/bin/python benchmarks/bench_prefect_overhead.py
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ def noop_dag(default: Path) -> Pipeline:
 NOOP = noop_dag(Path(__file__).with_name("noop_default.yaml"))
 
 
-def cli_runs(repeats: int = 3) -> None:
+def cli_runs(repeats: int = 3) -> list[list]:
     """Wall time of whole ``physanim run`` commands on the no-op DAG (fresh stage keys)."""
     root = Path(__file__).resolve().parents[1]
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PREFECT_", "PHYSANIM_"))}
@@ -86,6 +88,7 @@ def cli_runs(repeats: int = 3) -> None:
             ("prefect, next runs (reuse it)", med_reuse))  # fmt: skip
     for name, wall in rows:
         print(f"  {name:34s}: {wall:6.2f} s  (+{wall - med_local:5.2f} s over --local)")
+    return [[name, wall, wall - med_local] for name, wall in rows]
 
 
 def main() -> None:
@@ -114,7 +117,22 @@ def main() -> None:
     print(f"  local runner           : {local:6.2f} s")
     print(f"  prefect, first flow run: {first:6.2f} s  (overhead {first - local:5.2f} s)")
     print(f"  prefect, second run    : {second:6.2f} s  (overhead {second - local:5.2f} s)")
-    cli_runs()
+    cli = cli_runs()
+    # imported here: the CLI imports this module as benchmarks.bench_prefect_overhead
+    from results import Table, describe, record
+
+    in_process = [["local runner", local, 0.0], ["prefect, first flow run", first, first - local],
+                  ["prefect, second run", second, second - local]]  # fmt: skip
+    columns = ["runner", "wall_s", "over_local_s"]
+    record(
+        "bench_prefect_overhead",
+        [
+            Table(f"no-op DAG of {len(NAMES)} stages, in this process", columns, in_process),
+            Table("physanim run on the no-op DAG (whole command; medians of 3)", columns, cli),
+        ],  # fmt: skip
+        **describe(__doc__, "bench_prefect_overhead"),
+        headline={"local_s": cli[0][1], "prefect_first_s": cli[1][1], "prefect_next_s": cli[2][1]},
+    )
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from results import Table, describe, record  # benchmarks/results.py, beside this script
 
 from physanim.capture.actor import build_actor
 from physanim.render.colours import ColourMap
@@ -41,6 +42,7 @@ def main() -> None:
     )
     print(f"{'variant':34s} {'s/frame':>8s} {'total s':>8s}")
     frames = {}
+    rows = []  # (variant, s per frame, total s), recorded at the end
     for name, kw in [
         ("vtk, isolated worker (default)", dict(backend="vtk")),
         ("vtk, in-process", dict(backend="vtk", isolate=False)),
@@ -59,6 +61,7 @@ def main() -> None:
             dt = time.perf_counter() - t0
             frames[label] = out
             print(f"{name + ', ' + label:34s} {dt / args.frames:8.3f} {dt:8.2f}")
+            rows.append([f"{name}, {label}", dt / args.frames, dt])
     tiles = [
         panel([frames["skin"][i]] * 2 + [frames["colour map"][i]] * 2, ["a", "b", "c", "d"])
         for i in range(args.frames)
@@ -77,6 +80,23 @@ def main() -> None:
             via = "FFmpeg realtime" if ffmpeg else "OpenCV"
             name = f"encode {codec}{suffix} {w}x{h}, {via}"
             print(f"{name:34s} {dt / args.frames:8.3f} {dt:8.2f}")
+            rows.append([name, dt / args.frames, dt])
+    n_render = len(rows) - 4
+    columns = ["variant", "s_per_frame", "total_s"]
+    size_text = f"{size[0]}x{size[1]} px, {args.frames} frames"
+    record(
+        "bench_render",
+        [
+            Table(f"face render, {size_text}", columns, rows[:n_render]),
+            Table(f"encoding {args.frames} panels of {w}x{h}", columns, rows[n_render:]),
+        ],
+        **describe(__doc__, "bench_render"),
+        headline={
+            "vtk_worker_s_per_frame": rows[0][1],
+            "rasteriser_s_per_frame": rows[4][1],
+            "vp9_ffmpeg_s_per_frame": rows[n_render][1],
+        },
+    )
 
 
 if __name__ == "__main__":

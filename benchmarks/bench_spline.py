@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from results import Table, describe, record  # benchmarks/results.py, beside this script
 from scipy.integrate import quad
 
 from physanim.spline import Spline, natural_spline, sample
@@ -99,16 +100,36 @@ def main() -> None:
     smooth = np.c_[np.cos(u), 0.5 * np.sin(2.0 * u)]
     hairpin = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.02]])
     print(f"{'rule':10s} {'adaptive':>10s} {'fixed rule':>11s}   1000 samples, smooth curve")
+    timing, errors = [], []
     for rule in ("arc", "curvature"):
         ours = _median_ms(lambda r=rule: sample(natural_spline(smooth), r, 1000))
         old = _median_ms(lambda r=rule: FixedRule(natural_spline(smooth)).sample(r, 1000))
         print(f"{rule:10s} {ours:7.2f} ms {old:8.2f} ms")
+        timing.append([rule, ours, old])
     sp = natural_spline(hairpin)
     print(f"{'rule':10s} {'adaptive':>10s} {'fixed rule':>11s}   worst spacing error, hairpin")
     for rule in ("arc", "curvature"):
         ours = _spacing_error(sp, sample(sp, rule, 21)[1], rule)
         old = _spacing_error(sp, FixedRule(sp).sample(rule, 21), rule)
         print(f"{rule:10s} {100 * ours:9.2e}% {100 * old:9.2e}%")
+        errors.append([rule, 100 * ours, 100 * old])
+    record(
+        "bench_spline",
+        [
+            Table(
+                "1000 samples, smooth curve (medians of 15)",
+                ["rule", "adaptive_ms", "fixed_rule_ms"],
+                timing,
+            ),
+            Table(
+                "worst spacing error, hairpin (QUADPACK)",
+                ["rule", "adaptive_error_pct", "fixed_rule_error_pct"],
+                errors,
+            ),
+        ],
+        **describe(__doc__, "bench_spline"),
+        headline={"arc_ms": timing[0][1], "curvature_ms": timing[1][1]},
+    )
 
 
 if __name__ == "__main__":

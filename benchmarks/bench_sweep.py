@@ -16,7 +16,7 @@ seconds plus that overhead) on N workers. It is checked against the 2-worker run
 the one-worker stage times (what N workers with cores of their own would do) and with the
 2-worker run's own stage times (the schedule alone). The curve for a cold sweep (shared
 stages included, once) of 4 and of 64 variants is printed and plotted to ``--plot``.
-Usage: python benchmarks/bench_sweep.py [--frames 30] [--render-every 1] [--repeat 1]
+Usage: .venv/bin/python benchmarks/bench_sweep.py [--frames 30] [--render-every 1] [--repeat 1]
        [--threads T] [--serial] [--plot out/bench_sweep_scaling.png]
 """
 
@@ -30,6 +30,8 @@ import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+
+from results import Table, describe, record  # benchmarks/results.py, beside this script
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ("uniform", "model1", "model2", "model3")
@@ -187,10 +189,12 @@ def main() -> None:
     print(f"model: fixed cost {fixed:.1f} s (cluster start, planning, report), "
           f"{per_job:.2f} s overhead per job ({len(jobs_one)} jobs)")  # fmt: skip
     print("  stage seconds summed over the variants, 1 worker / 2 workers:")
+    stage_rows = []
     for stage in PER_VARIANT:
         a = sum(t for (s, _), t in one.items() if s == stage)
         b = sum(t for (s, _), t in two.items() if s == stage)
         print(f"    {stage:10s} {a:7.1f} / {b:7.1f}  ({b / a:.2f}x)")
+        stage_rows.append([stage, a, b, b / a])
     print("  2 workers, predicted vs measured "
           f"{median['2 workers']:.1f} s: with the 1-worker stage times (workers with cores of "
           f"their own) {predict_wall(jobs_one, 2, fixed, per_job):.1f} s; with the 2-worker "
@@ -202,11 +206,14 @@ def main() -> None:
     chain = sum(mean.values()) + per_job * len(PER_VARIANT)
     serial_part = fixed + sum(shared_s.values()) + per_job * len(shared_s)
     curves = {}
+    curve_rows = []
     for variants in (len(MODELS), 16, 64):
         jobs = sweep_jobs(shared_s, mean, upstream, variants)
         walls_n = [predict_wall(jobs, n, fixed, per_job) for n in CURVE_WORKERS]
         curves[f"{variants} variants"] = walls_n
         cells = "  ".join(f"N={n}: {walls_n[n - 1] / 60:5.1f}" for n in SHOWN_WORKERS)
+        curve_rows.append([variants, *(walls_n[n - 1] / 60 for n in SHOWN_WORKERS),
+                           walls_n[0] / walls_n[variants - 1]])  # fmt: skip
         print(f"  cold sweep of {variants:2d} variants, predicted wall (min): {cells}")
         print(f"    speed-up at N = V: {walls_n[0] / walls_n[variants - 1]:.1f}x; floor "
               f"{(serial_part + chain) / 60:.1f} min = serial part {serial_part / 60:.1f} min "
@@ -216,6 +223,51 @@ def main() -> None:
     measured = {1: median["1 worker"], 2: median["2 workers"]}
     plot_curves(curves, measured, args.plot)
     print(f"  plot: {args.plot}")
+    model = [
+        ["fixed cost", fixed, "s"],
+        ["overhead per job", per_job, "s"],
+        ["shared stages", sum(shared_s.values()), "s"],
+        ["a variant's chain", chain, "s"],
+        [
+            "2 workers predicted, 1-worker stage times",
+            predict_wall(jobs_one, 2, fixed, per_job),
+            "s",
+        ],
+        ["2 workers predicted, own stage times", predict_wall(jobs_two, 2, fixed, per_job), "s"],
+    ]
+    record(
+        "bench_sweep",
+        [
+            Table(
+                f"{len(MODELS)} variants, {args.frames} frames, whole run_sweep call, median of "
+                f"{args.repeat}",
+                ["mode", "wall_s", "runs_s"],
+                [[m, median[m], walls[m]] for m in modes],
+                notes=f"2 workers / 1 worker: {ratio:.2f}",
+            ),
+            Table(
+                "stage seconds summed over the variants",
+                ["stage", "one_worker_s", "two_workers_s", "ratio"],
+                stage_rows,
+            ),
+            Table(
+                "the scaling model, fitted on the one-worker runs",
+                ["figure", "value", "unit"],
+                model,
+            ),
+            Table(
+                "predicted cold sweeps, workers with cores of their own",
+                ["variants", *(f"N{n}_min" for n in SHOWN_WORKERS), "speed_up_at_N_equal_variants"],
+                curve_rows,
+            ),
+        ],
+        **describe(__doc__, "bench_sweep"),
+        headline={
+            "one_worker_s": median["1 worker"],
+            "two_workers_s": median["2 workers"],
+            "ratio": ratio,
+        },
+    )
 
 
 if __name__ == "__main__":

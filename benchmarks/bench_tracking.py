@@ -3,6 +3,8 @@
 Prints frames/s of the full 2D tracker (labelling, LK, ROI re-detection, assignment) next
 to a baseline measured in the same process: full-frame dot detection alone per frame.
 Frames are synthetic: 36 anti-aliased dots on a shaded, noisy skin background, moving.
+
+Run: .venv/bin/python benchmarks/bench_tracking.py
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ import time
 
 import cv2
 import numpy as np
+from results import Table, describe, record  # benchmarks/results.py, beside this script
 
 from physanim.tracking.detect import detect_markers
 from physanim.tracking.params import TrackParams
@@ -47,6 +50,20 @@ def main() -> None:
     print(f"tracking (markers, 640x480): {fps:7.1f} frames/s  (target >= 30)")
     print(f"baseline full-frame detection only: {base:7.1f} frames/s")
     print(f"markers tracked: {conf.mean():.3f} of {conf.size} marker-frames")
+    rows = [["2D tracker (markers)", fps], ["full-frame detection only (baseline)", base]]
+    record(
+        "bench_tracking",
+        [
+            Table(
+                f"marker tracking at 640x480, {len(imgs)} synthetic frames",
+                ["tracker", "frames_per_s"],
+                rows,
+                notes=f"markers tracked: {conf.mean():.3f} of {conf.size} marker-frames",
+            )
+        ],
+        **describe(__doc__, "bench_tracking"),
+        headline={"tracking_frames_per_s": fps},
+    )
 
 
 if __name__ == "__main__":
