@@ -19,14 +19,16 @@ CONFIG_ARGS := $(foreach c,$(CONFIG),-c $(c))
 # demo's Newmark matrix takes 0.4 s instead of 3.2 s with Debian's reference BLAS.
 DEB_PACKAGES := libusb-1.0-0 libgomp1 libgl1 libegl1 libglib2.0-0 libsuitesparse-dev libopenblas0-pthread
 
-.PHONY: help setup setup-system system-check pipeline stage status arm sweep dag demo test bench lint format clean-store
+.PHONY: help setup setup-system system-check pipeline stage status arm sweep dag demo test bench docs lint format clean-store
 
 help:
 	@echo "make pipeline [DATASET=demo] [CONFIG=configs/x.yaml] - run the face pipeline"
 	@echo "make stage STAGE=name                              - (re)run one stage"
 	@echo "make arm                                           - muscle-driven arm, all conditions"
 	@echo "make sweep SWEEP=configs/sweeps/x.yaml             - parameter sweep on Dask"
-	@echo "make status | dag | test | bench | lint | setup-system"
+	@echo "make bench                                         - run the benchmarks, record JSON, regenerate docs"
+	@echo "make docs                                          - regenerate docs/PERFORMANCE.md and docs/STAGES.md"
+	@echo "make status | dag | test | lint | setup-system"
 
 $(VENV)/.installed: pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -78,8 +80,14 @@ dag: setup
 test: setup
 	$(PY) -m pytest -q $(ARGS)
 
+# Each benchmark appends its run to benchmarks/results/<name>.json; the page is made from those.
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+	$(PY) benchmarks/perf_doc.py
+
+docs: setup
+	$(PY) benchmarks/perf_doc.py
+	$(PY) -m flows.stage_docs
 
 lint: setup
 	$(VENV)/bin/ruff check .
