@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from matplotlib import pyplot as plt
 from pydantic import ValidationError
 
 from physanim.fem.region_materials import material_table, tet_materials
@@ -17,6 +18,7 @@ from physanim.mesh.regions import (
     skin_regions,
     tet_regions,
 )
+from tests.render.plot_content import assert_not_blank, capture_figures, read_rgb
 
 MATERIALS_DIR = Path(__file__).resolve().parents[2] / "configs" / "materials"
 
@@ -28,7 +30,8 @@ def side_areas(v, f, labels):
     return left, right
 
 
-def test_regions_cover_the_face_symmetrically(skin, landmarks, tmp_path):
+def test_regions_cover_the_face_symmetrically(skin, landmarks, tmp_path, monkeypatch):
+    saved = capture_figures(monkeypatch)
     v, f = skin
     labels = skin_regions(v, landmarks, MaterialsParams())
     left, right = side_areas(v, f, labels)
@@ -43,7 +46,35 @@ def test_regions_cover_the_face_symmetrically(skin, landmarks, tmp_path):
     # Every region is present, and most of the face stays default.
     assert np.all(total > 0) and total[DEFAULT_LABEL] > 0.5 * total.sum()
     png = plot_regions(v, f, labels, tmp_path / "regions.png", landmarks)
-    assert png.stat().st_size > 10_000
+    _check_region_plot(png, saved[-1][0])
+
+
+def _check_region_plot(png, fig):
+    """Every region's colour is painted on the face (the legend left out), whatever its
+    shading (chromaticity r : g : b), and cphs_L on the viewer's right of x = 0, cphs_R left."""
+    img = read_rgb(png).astype(float)
+    assert_not_blank(img)
+    # pixels of the PNG (saved with bbox_inches="tight", pad 0.1 in) from display coordinates
+    tight = fig.get_tightbbox()
+    x0, top = (tight.x0 - 0.1) * fig.dpi, (tight.y1 + 0.1) * fig.dpi
+    ax = fig.axes[0]
+    leg = ax.get_legend().get_window_extent()
+    on_face = np.ones(img.shape[:2], bool)
+    on_face[
+        int(top - leg.y1) - 2 : int(top - leg.y0) + 3, int(leg.x0 - x0) - 2 : int(leg.x1 - x0) + 3
+    ] = False
+    bright = img.sum(axis=2) > 120  # not the black landmark dots and labels
+    chroma = img / np.maximum(img.sum(axis=2, keepdims=True), 1.0)
+    centre = ax.transData.transform([[0.0, 0.0]])[0, 0] - x0  # column of x = 0
+    cmap = plt.get_cmap("tab10")
+    where = {}
+    for i, name in enumerate(LABEL_NAMES[1:], start=1):
+        rgb = np.array(cmap(i)[:3])
+        near = np.linalg.norm(chroma - rgb / rgb.sum(), axis=2) < 0.03
+        where[name] = np.nonzero(near & bright & on_face)[1]
+        assert len(where[name]) > 20, (name, len(where[name]))
+        assert np.any(near & bright & ~on_face), name  # and it has a legend entry
+    assert np.mean(where["cphs_L"] > centre) > 0.95 and np.mean(where["cphs_R"] < centre) > 0.95
 
 
 def test_tet_regions_take_the_nearest_skin_label():
