@@ -64,6 +64,10 @@ class SpringsOutput:
     total_N: float
 
 
+class NoParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
 def _nothing(ctx) -> None:
     raise AssertionError("documenting a stage never runs it")
 
@@ -75,10 +79,12 @@ def test_toy_pipeline_doc_shows_fields_units_defaults_and_outputs(tmp_path: Path
         "springs", ("scale",), SpringParams, "3", _nothing, doc="pull skin patches",
         output=SpringsOutput,
     )  # fmt: skip
-    toy = Pipeline("toy", (SOURCE, SCALE, TOTAL, springs), config)
+    raw = StageSpec("raw", ("springs",), NoParams, "1", _nothing)  # writes its group itself
+    toy = Pipeline("toy", (SOURCE, SCALE, TOTAL, springs, raw), config)
     text = stage_docs.document([toy])
 
-    assert "## toy DAG" in text and "- [toy DAG](#toy-dag): source, scale, total, springs" in text
+    assert "## toy DAG" in text
+    assert "- [toy DAG](#toy-dag): source, scale, total, springs, raw" in text
     # the params model's fields: type, allowed range, default (the config file's), description
     assert "| `n_frames` | `int` | >= 1, <= 10000 | `8` | frames |" in text
     assert "| `slow_s` | `float` | >= 0.0 | `0.0` | sleep between frames, s (for kill" in text
@@ -89,13 +95,14 @@ def test_toy_pipeline_doc_shows_fields_units_defaults_and_outputs(tmp_path: Path
     assert "| `patch.stiffness_N_per_m` | `float` | > 0, <= 1000000.0 | `20000.0` | spring" in text
     assert "| `overrides.<key>.stiffness_N_per_m` | `float` |" in text
     # the stage's version, upstream, doc, and its output dataclass with nested fields
-    section = text[text.index("### springs") :]
+    section = text[text.index("### springs") : text.index("### raw")]
     assert "version 3; upstream: [scale](#scale)." in section
     assert "Pull skin patches." in section
     assert "**Output** (`SpringsOutput`)" in section and "The springs' pull:" in section
     for row in ("| `pull` | `Pull` |", "| `pull.distance` | `np.ndarray` |",
                 "| `pull.names` | `list[str]` |", "| `total_N` | `float` |"):  # fmt: skip
         assert row in section, row
-    # an untyped stage says it has no declared output; a stage without params says so
-    assert "the stage writes its group itself" in text[text.index("### source") :]
-    assert "None." in text[text.index("### total") : text.index("### springs")]
+    # a stage without params or a declared output dataclass says so
+    section = text[text.index("### raw") :]
+    assert "**Parameters** (`NoParams`; `--set raw.<name>=<value>`)\n\nNone." in section
+    assert "the stage writes its group itself" in section
