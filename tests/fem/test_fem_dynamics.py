@@ -117,5 +117,14 @@ def test_split_anp_solver_matches_direct_solve(solver, slow_blas, monkeypatch):
     other = split.with_dt(3e-4)  # a cached step size: same symbolic analysis, new factor
     ref = Newmark(model.K, model.M, model.C, 3e-4, fixed, "superlu").solve(b)
     np.testing.assert_allclose(other.solve(b), ref, rtol=0, atol=1e-10 * np.abs(ref).max())
-    if solver == "auto" and has_cholmod():
-        assert (split._split is not None) == slow_blas
+
+
+@pytest.mark.parametrize("slow_blas", [False, True])
+def test_auto_solver_splits_with_cholmod_only_under_a_slow_blas(slow_blas, monkeypatch):
+    if not has_cholmod():
+        pytest.skip("CHOLMOD (scikit-sparse) not installed: the auto solver's choice not run")
+    monkeypatch.setattr(newmark_module, "optimized_blas", lambda: not slow_blas)
+    model, fixed, _ = _cantilever(eta=2.0)
+    split = Newmark(model.K, model.M, model.C, 1e-4, fixed, "auto", model.split)
+    assert split.solver == "cholmod"
+    assert (split._split is not None) == slow_blas

@@ -18,7 +18,9 @@ from physanim.fem.parallel_spmv import ParallelCSR, SymmetricQuadraticForm
 from physanim.fem.params import SimulateParams
 from tests.fem.fem_meshes import box_mesh
 
-needs_cholmod = pytest.mark.skipif(not has_cholmod(), reason="scikit-sparse not installed")
+needs_cholmod = pytest.mark.skipif(
+    not has_cholmod(), reason="CHOLMOD (scikit-sparse) not installed: CHOLMOD check not run"
+)
 
 
 def _dense_ldl(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
