@@ -18,7 +18,6 @@ import argparse
 import resource
 import statistics
 import time
-from typing import Any
 
 import numba
 import numpy as np
@@ -33,21 +32,22 @@ from physanim.fem.linsolve import CholmodFactors, blas_in_use
 from physanim.fem.model import build_model
 from physanim.fem.newmark import Newmark, State
 from physanim.fem.params import SimulateParams
-from physanim.fem.simulate import frames_per_thread_count, simulate
+from physanim.fem.problem import FemProblem
+from physanim.fem.simulate import frames_per_thread_count, simulate_problem
 from physanim.pipeline import stage_inputs
 from physanim.pipeline.progress import rich_progress
 from physanim.pipeline.spec import dataset_overrides
 from tasks.simulate import SimulateStageParams, simulate_inputs
 
 
-def demo_inputs() -> tuple[dict[str, Any], SimulateStageParams]:
-    """``simulate`` arguments and stage parameters of the demo (default config)."""
+def demo_inputs() -> tuple[FemProblem, SimulateStageParams]:
+    """The FEM problem and the stage parameters of the demo (default config)."""
     config, _ = load_config(FACE.config_model(), [FACE.default_config], dataset_overrides("demo"))
     with rich_progress() as progress:
         inputs = stage_inputs(FACE, config, "simulate", progress)
     params = config.section("simulate", SimulateStageParams)
-    args, _ = simulate_inputs(**inputs, params=params)
-    return args, params
+    problem, _ = simulate_inputs(**inputs, params=params)
+    return problem, params
 
 
 def time_steps(model, pres, dt, solver, n_steps):
@@ -65,13 +65,13 @@ def time_steps(model, pres, dt, solver, n_steps):
     return t_fac, (time.perf_counter() - t0) / n_steps, nm
 
 
-def compare_stepping(sim: dict[str, Any], params: SimulateStageParams, repeats: int) -> Table:
+def compare_stepping(sim: FemProblem, params: SimulateStageParams, repeats: int) -> Table:
     """The demo's simulate: reference, previous default and fast paths side by side (the
     printed table, returned for the results file: wall times in s, errors in % and mm)."""
     print(f"BLAS under CHOLMOD: {blas_in_use()}; numba threads: {numba.get_num_threads()}")
     t0 = time.perf_counter()
     ref_params = params.model_copy(update={"dt": 5e-4, "stepping": "fixed"})
-    ref = simulate(**sim, params=ref_params).displacements.astype(np.float64)
+    ref = simulate_problem(sim, ref_params).displacements.astype(np.float64)
     t_ref = time.perf_counter() - t0
     print(f"reference: fixed dt = 0.5 ms, float64, in {t_ref:.1f} s (once)")
     recorded = [["reference: fixed dt = 0.5 ms, float64 (once)", t_ref, [t_ref], *[None] * 4, 0, 0]]
@@ -91,7 +91,7 @@ def compare_stepping(sim: dict[str, Any], params: SimulateStageParams, repeats: 
         walls, res = [], None
         for _ in range(repeats):
             t0 = time.perf_counter()
-            res = simulate(**sim, params=params.model_copy(update=update))
+            res = simulate_problem(sim, params.model_copy(update=update))
             walls.append(time.perf_counter() - t0)
         err = np.linalg.norm(res.displacements - ref, axis=2).max()
         per_count = frames_per_thread_count(res.solver_threads).items()
@@ -114,14 +114,14 @@ def compare_stepping(sim: dict[str, Any], params: SimulateStageParams, repeats: 
                  f"{blas_in_use()}; numba threads: {numba.get_num_threads()}")  # fmt: skip
 
 
-def compare_factorizations(sim: dict[str, Any], repeats: int) -> Table:
+def compare_factorizations(sim: FemProblem, repeats: int) -> Table:
     """Refactorising the demo's Newmark matrix (one frame per step) after the symbolic
     analysis, up to a ready solver: supernodal LL^T of A_uu (default, BLAS-3) and simplicial
     LDL^T of the sparser augmented matrix (the previous default)."""
-    model = build_model(sim["nodes"], sim["tets"], sim["materials"])
-    pres = node_dofs(sim["driven_idx"])
-    ks = sim["springs"].matrix(model.n_dofs)
-    nm = Newmark(model.K + ks, model.M, model.C, sim["frame_dt"], pres)
+    model = build_model(sim.nodes, sim.tets, sim.materials)
+    pres = node_dofs(sim.conditions.driven_idx)
+    ks = sim.conditions.springs.matrix(model.n_dofs)
+    nm = Newmark(model.K + ks, model.M, model.C, sim.frame_dt, pres)
     h, u = nm.dt, nm.free
     K_el, G, w = model.split
     A_el = (K_el + ks + 4 / h**2 * model.M + 2 / h * model.C).tocsr()[u][:, u]
@@ -158,13 +158,14 @@ def main() -> None:
     args = ap.parse_args()
 
     sim, params = demo_inputs()
-    nodes, tets, mat = sim["nodes"], sim["tets"], sim["materials"]
-    driven, traj, springs = sim["driven_idx"], sim["driven_traj"], sim["springs"]
+    nodes, tets, mat = sim.nodes, sim.tets, sim.materials
+    driven, springs = sim.conditions.driven_idx, sim.conditions.springs
+    traj = sim.conditions.values.reshape(sim.n_frames, -1, 3)  # (T, n_d, 3) m
     print(
         f"demo mesh: {len(nodes)} nodes, {len(tets)} tets, {3 * len(nodes)} DOF "
         f"({len(driven)} prescribed bone-side nodes, "
         f"{0 if springs is None else len(springs.nodes)} skin nodes on springs); "
-        f"{len(traj)} frames at {1 / sim['frame_dt']:.0f} fps"
+        f"{len(traj)} frames at {1 / sim.frame_dt:.0f} fps"
     )
     stepping = compare_stepping(sim, params, args.repeats)
     factorisations = compare_factorizations(sim, args.repeats)
@@ -189,7 +190,7 @@ def main() -> None:
             )
             per_solver.append([name, t_asm, t_fac, 1e3 * per_step, dt / per_step])
 
-    res = simulate(**sim, params=params.model_copy(update={"stepping": "fixed"}))
+    res = simulate_problem(sim, params.model_copy(update={"stepping": "fixed"}))
     n_steps = (len(traj) - 1) * res.n_substeps
     tm = res.timings
     per_step = tm["stepping"] / n_steps
@@ -207,8 +208,9 @@ def main() -> None:
 
     n_cor = 3
     cor = params.model_copy(update={"corotational": True})
-    short = {**sim, "driven_traj": traj[: n_cor + 1], "springs": None}  # corotational: no springs
-    res_c = simulate(**short, params=cor)
+    # corotational: no springs
+    short = FemProblem.driven(nodes, tets, mat, driven, traj[: n_cor + 1], sim.frame_dt)
+    res_c = simulate_problem(short, cor)
     steps_c = n_cor * res_c.n_substeps
     print(
         f"corotational: {1e3 * res_c.timings['stepping'] / steps_c:.1f} ms/step over {steps_c} "

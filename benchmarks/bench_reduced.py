@@ -28,19 +28,19 @@ from flows.dags import FACE
 from physanim.config import load_config
 from physanim.fem import reduced
 from physanim.fem.model import build_model
-from physanim.fem.simulate import simulate
-from physanim.fem.statics import free_dofs
+from physanim.fem.preview import ReducedParams, build_basis
+from physanim.fem.problem import FemProblem
+from physanim.fem.simulate import simulate_problem
 from physanim.pipeline import stage_inputs
 from physanim.pipeline.progress import rich_progress
 from physanim.pipeline.spec import dataset_overrides
-from tasks.preview import ReducedParams, conditions
 from tasks.simulate import SimulateStageParams, simulate_inputs
 
 MODELS = ("uniform", "model1", "model2", "model3")
 
 
-def variant_inputs(model: str) -> tuple[dict[str, Any], Any, SimulateStageParams]:
-    """``simulate`` arguments, the materials output and the stage params of one model."""
+def variant_inputs(model: str) -> tuple[FemProblem, Any, SimulateStageParams]:
+    """The FEM problem, the materials output and the stage params of one model."""
     files = [FACE.default_config]
     if model != "uniform":
         files.append(Path("configs/models") / f"{model}.yaml")
@@ -48,8 +48,8 @@ def variant_inputs(model: str) -> tuple[dict[str, Any], Any, SimulateStageParams
     with rich_progress() as progress:
         inputs = stage_inputs(FACE, config, "simulate", progress)
     params = config.section("simulate", SimulateStageParams)
-    args, _ = simulate_inputs(**inputs, params=params)
-    return args, inputs["materials"], params
+    problem, _ = simulate_inputs(**inputs, params=params)
+    return problem, inputs["materials"], params
 
 
 def timed(repeats: int, fn):
@@ -68,23 +68,16 @@ def main() -> None:
     opts = parser.parse_args()
     variants = {m: variant_inputs(m) for m in MODELS}
     full = {}
-    for m, (args, _, params) in variants.items():
-        full[m] = timed(opts.repeats, lambda a=args, p=params: simulate(**a, params=p))
+    for m, (problem, _, params) in variants.items():
+        full[m] = timed(opts.repeats, lambda a=problem, p=params: simulate_problem(a, p))
         print(f"full run {m}: {full[m][0]:.1f} s")
 
-    args, materials, params = variants["uniform"]
-    settings = ReducedParams()
-    base = full["uniform"][1]
-    bc = conditions(args)
-    t0 = time.perf_counter()
-    model = build_model(args["nodes"], args["tets"], args["materials"], params)
-    rebuild = lambda mats: build_model(args["nodes"], args["tets"], mats, params)  # noqa: E731
-    extra = reduced.material_sensitivities(
-        model, bc, base.displacements, base.times, materials.tet_labels, rebuild,
-        args["materials"], settings.sensitivity_modes, params.solver,
-    )  # fmt: skip
-    free = free_dofs(model.n_dofs, bc.prescribed_dofs)
-    basis = reduced.pod_basis(base.displacements, free, settings.energy, settings.max_modes, extra)
+    problem, materials, params = variants["uniform"]
+    bc = problem.conditions
+    t0 = time.perf_counter()  # the basis: its own full run of the uniform model, POD, sensitivities
+    built = build_basis(problem, materials.tet_labels, params, ReducedParams())
+    basis = reduced.PodBasis(built["phi"], built["free"], built["singular_values"])
+    free = basis.free
     t_basis = time.perf_counter() - t0
     print(
         f"basis: {basis.size} modes ({len(free)} free DOFs), energy {basis.energy:.7f}, "
@@ -95,11 +88,11 @@ def main() -> None:
         f"{'err % peak':>10s} {'err % rms':>9s} {'estimate % peak':>15s} {'estimate s':>10s}"
     )
     rows = []
-    for m, (args, _, params) in variants.items():
+    for m, (problem, _, params) in variants.items():
 
-        def preview(a=args, p=params):
-            variant = build_model(a["nodes"], a["tets"], a["materials"], p)
-            return variant, reduced.simulate_reduced(variant, bc, basis, base.frame_substeps)
+        def preview(a=problem, p=params):
+            variant = build_model(a.nodes, a.tets, a.materials, p)
+            return variant, reduced.simulate_reduced(variant, bc, basis, built["substeps"])
 
         wall, (variant, run) = timed(opts.repeats, preview)
         u = run.result.displacements

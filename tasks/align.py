@@ -14,7 +14,7 @@ import numpy as np
 
 from physanim.mesh.binding import Binding
 from physanim.mesh.params import AlignParams
-from physanim.pipeline import StageContext, StageSpec
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 from tasks.fit import FitOutput
 from tasks.scan import ScanOutput
 from tasks.track import TrackOutput
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
-class AlignOutput:
+class AlignOutput(StageOutput):
     """The scan, bound to the motion mesh and animated by it (T frames, N scan vertices).
 
     ``scan_vertices`` (N, 3) m, ``scan_faces`` (F, 3), cut along the lip seam: ``scan_side``
@@ -75,7 +75,7 @@ def compute(
         scan.vertices, scan.faces, track.landmark_names, track.template, fit.motion,
         fit.triangles, fit.vertex_names, params, ctx.progress("align"),
     )  # fmt: skip
-    ctx.summary.update(
+    summary = dict(
         scan_vertices=len(bound.vertices),
         scan_faces=len(bound.faces),
         lip_seam_edges=bound.seam_faces,
@@ -85,7 +85,7 @@ def compute(
         bound.vertices, bound.faces, bound.side, bound.parent, bound.mouth.points,
         bound.motion.astype(np.float32), fit.triangles, bound.landmark_vertices,
         bound.landmarks, bound.binding, bound.kinematic.astype(np.float32),
-        bound.landmark_names, params.lip_band_m,
+        bound.landmark_names, params.lip_band_m, summary=summary,
     )  # fmt: skip
 
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pydantic import BaseModel, ConfigDict, Field
 
 from physanim.muscle.params import ArmConditions
-from physanim.pipeline import StageContext, StageSpec
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 from tasks.muscles import MusclesOutput
 
 
@@ -20,7 +20,7 @@ class ArmRenderParams(BaseModel):
 
 
 @dataclass(frozen=True)
-class ArmRenderOutput:
+class ArmRenderOutput(StageOutput):
     """No arrays: the output is its files (``<condition>/arm.mp4`` and frames, the plots)."""
 
 
@@ -55,8 +55,9 @@ def compute(
     plot_muscle_timeseries(results, base.arm, out / "fibre_length.png", "fibre_length")
     plot_muscle_curves(out / "muscle_curves.png")
     plot_condition_summary(results, [lk.name for lk in base.arm.links], out / "conditions.png")
-    ctx.summary["files"] = sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))
-    return ArmRenderOutput()
+    return ArmRenderOutput(
+        summary={"files": sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))}
+    )
 
 
 SPEC = StageSpec.typed(

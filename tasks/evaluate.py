@@ -7,16 +7,22 @@ Version history: CHANGELOG.md.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from physanim.evaluate.face import EvaluateParams, FaceEvaluation, FaceRun
-from physanim.pipeline import DatasetParams, StageContext, StageSpec
+from physanim.pipeline import DatasetParams, StageContext, StageOutput, StageSpec
 from tasks.align import AlignOutput
 from tasks.materials import MaterialsOutput
 from tasks.simulate import SimulateOutput
 from tasks.tetra import TetraOutput
 from tasks.track import TrackOutput
+
+
+@dataclass(frozen=True)
+class EvaluateOutput(FaceEvaluation, StageOutput):
+    """Every field of :class:`~physanim.evaluate.face.FaceEvaluation` plus the summary."""
 
 
 def fingerprint(dataset: DatasetParams, params: EvaluateParams) -> Mapping[str, object]:
@@ -76,7 +82,7 @@ def compute(
     materials: MaterialsOutput,
     simulate: SimulateOutput,
     ctx: StageContext[EvaluateParams],
-) -> FaceEvaluation:
+) -> EvaluateOutput:
     """Measures per variant (fem, kinematic, tracked); philtrum peaks; with truth: fidelity,
     lip gap and surface distance per frame."""
     from physanim.evaluate.face import evaluate_face
@@ -86,8 +92,8 @@ def compute(
     path = ctx.dataset_dir / params.truth
     truth = load_truth(path, run.displacements.shape[0]) if path.exists() else None
     evaluation, summary = evaluate_face(run, truth, params)
-    ctx.summary.update(summary)
-    return evaluation
+    measures = {f.name: getattr(evaluation, f.name) for f in fields(evaluation)}
+    return EvaluateOutput(**measures, summary=summary)
 
 
 SPEC = StageSpec.typed(

@@ -8,12 +8,12 @@ import numpy as np
 
 from physanim.face.fit import Embedding, FitResult
 from physanim.face.params import FitParams
-from physanim.pipeline import StageContext, StageSpec
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 from tasks.track import TrackOutput
 
 
 @dataclass(frozen=True, kw_only=True)
-class FitOutput(FitResult):
+class FitOutput(FitResult, StageOutput):
     """The face model fitted per frame: every field of ``physanim.face.fit.FitResult`` (``su``
     (n_su,); ``au`` (T, n_au); ``pose`` (T, 6) rotvec rad + t m; ``motion`` (T, V, 3) m, the
     motion mesh in the model frame; ``residual`` (T, K) m; ``rms`` (T,) m) plus the model:
@@ -40,7 +40,7 @@ def compute(params: FitParams, track: TrackOutput, ctx: StageContext[FitParams])
     model = load_face_model()
     embedding = embed_landmarks(model, names, points, conf, params)
     result = fit_sequence(model, embedding, points, conf, params, progress=ctx.progress("fit"))
-    ctx.summary.update(
+    summary = dict(
         rms_mm=round(float(result.rms.mean()) * 1e3, 3),
         max_rms_mm=round(float(result.rms.max()) * 1e3, 3),
     )
@@ -48,7 +48,7 @@ def compute(params: FitParams, track: TrackOutput, ctx: StageContext[FitParams])
         **vars(result),  # the FitResult fields
         embedding=embedding, triangles=model.triangles, au_names=list(model.au_names),
         su_names=list(model.su_names), vertex_names=list(model.vertex_names),
-        landmark_names=list(names),
+        landmark_names=list(names), summary=summary,
     )  # fmt: skip
 
 

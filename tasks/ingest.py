@@ -18,12 +18,13 @@ from physanim.pipeline import (
     PipelineConfig,
     ProgressFactory,
     StageContext,
+    StageOutput,
     StageSpec,
 )
 
 
 @dataclass(frozen=True)
-class IngestOutput:
+class IngestOutput(StageOutput):
     """An ingested recording of T frames (``physanim.capture.frames.Capture`` as stored).
 
     ``color`` (T, H, W, 3) uint8 RGB and ``depth`` (T, H, W) float32 m (NaN invalid), read
@@ -71,7 +72,7 @@ def compute(params: IngestParams, ctx: StageContext[IngestParams]) -> IngestOutp
     from physanim.capture.ingest import load_capture
 
     capture = load_capture(ctx.dataset_dir, params, ctx.progress("ingest"))
-    ctx.summary.update(
+    summary = dict(
         source=capture.source,
         frames=capture.n_frames,
         fps=capture.fps,
@@ -82,7 +83,8 @@ def compute(params: IngestParams, ctx: StageContext[IngestParams]) -> IngestOutp
         implausible_depth_frames=capture.implausible_depth,
         warnings=capture.warnings,
     )
-    return IngestOutput(**{f.name: getattr(capture, f.name) for f in fields(IngestOutput)})
+    arrays = {f.name: getattr(capture, f.name) for f in fields(IngestOutput) if f.name != "summary"}
+    return IngestOutput(**arrays, summary=summary)
 
 
 SPEC = StageSpec.typed(

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from physanim.pipeline import StageContext, StageSpec
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 from tasks.keyframes import KeyframesOutput, KeyframeStageParams, project_path
 
 
@@ -23,7 +23,7 @@ class KeyframeRenderParams(BaseModel):
 
 
 @dataclass(frozen=True)
-class KeyframeRenderOutput:
+class KeyframeRenderOutput(StageOutput):
     """No arrays: the output is its files (frames, ``animation.mp4``, the joint-angle plot)."""
 
 
@@ -65,8 +65,8 @@ def compute(
         elevation=params.elevation_deg,
         progress=ctx.progress("render"),
     )
-    ctx.summary["files"] = sorted(str(p.relative_to(ctx.files_dir)) for p in written.values())
-    return KeyframeRenderOutput()
+    files = sorted(str(p.relative_to(ctx.files_dir)) for p in written.values())
+    return KeyframeRenderOutput(summary={"files": files})
 
 
 SPEC = StageSpec.typed(

@@ -12,7 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from physanim.dynamics.params import KeyframeParams
 from physanim.dynamics.placement import Placement
-from physanim.pipeline import DatasetParams, StageContext, StageSpec
+from physanim.pipeline import DatasetParams, StageContext, StageOutput, StageSpec
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -39,7 +39,7 @@ class KeyframeStageParams(BaseModel):
 
 
 @dataclass(frozen=True)
-class KeyframesOutput:
+class KeyframesOutput(StageOutput):
     """The animation of F frames, n joints (``physanim.dynamics.keyframes.KeyframeResult``):
     ``times`` (F,) s, ``q`` (F, n) rad, ``qd`` (F, n) rad/s, ``simulated`` (F, n) bool, the
     world ``placement``; ``joint_names`` (n), ``fps`` frames/s, the ``figure`` file and the
@@ -77,18 +77,18 @@ def compute(params: KeyframeStageParams, ctx: StageContext[KeyframeStageParams])
     fig = Figure.from_yaml(spec.figure)
     result = run_keyframes(fig, spec, params=params.numerics, progress=ctx.progress("keyframes"))
     contact = result.placement.contact
-    ctx.summary.update(
+    summary = dict(
         frames=len(result.q),
         min_clearance_mm=round(float(result.placement.distance.min()) * 1e3, 3),
         airborne_frames=[int(i) for i in (~contact).nonzero()[0]],
     )
     if spec.path is not None:
         steps = np.diff(result.placement.base_pos[:, [0, 2]], axis=0)
-        ctx.summary["path_length_m"] = round(float(np.linalg.norm(steps, axis=1).sum()), 4)
-        ctx.summary["path_spacing"] = spec.path.spacing
+        summary["path_length_m"] = round(float(np.linalg.norm(steps, axis=1).sum()), 4)
+        summary["path_spacing"] = spec.path.spacing
     return KeyframesOutput(
         result.times, result.q, result.qd, result.simulated, result.placement,
-        list(fig.joint_names), spec.fps, spec.figure, spec.name,
+        list(fig.joint_names), spec.fps, spec.figure, spec.name, summary=summary,
     )  # fmt: skip
 
 

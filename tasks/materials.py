@@ -2,28 +2,20 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 from pydantic import ConfigDict, Field
 
-from physanim.mesh.params import MaterialModel, MaterialsParams, TissueMaterial
-from physanim.pipeline import StageContext, StageSpec
+from physanim.mesh.params import UNIFORM, MaterialModel, MaterialsParams
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 from tasks.align import AlignOutput
 from tasks.tetra import TetraOutput
 
 if TYPE_CHECKING:
     from physanim.fem.materials import TetMaterials
-
-#: The seed's uniform model (SPEC section 1, item 6), used when no materials file is merged.
-UNIFORM = MaterialModel(
-    name="uniform",
-    description="Seed 004 uniform model",
-    default=TissueMaterial(E_kPa=192.4, nu=0.495, eta_Pa_s=476.8, rho_kg_m3=1100.0),
-    regions={},
-)
 
 
 class MaterialsStageParams(MaterialsParams):
@@ -34,10 +26,12 @@ class MaterialsStageParams(MaterialsParams):
 
 
 @dataclass(frozen=True)
-class MaterialsOutput:
+class MaterialsOutput(StageOutput):
     """Per-tet materials of the m tets: ``E`` Pa, ``nu``, ``eta`` Pa s, ``rho`` kg/m^3 (m,);
     ``tet_labels`` (m,) int8 and ``scan_labels`` (N_scan,) region indices into
-    ``region_names``; ``files/regions.png`` shows the regions on the scan."""
+    ``region_names``; the fields a material law declares beyond those (``extra_names``, SI
+    units in the names) as the columns of ``extra_values`` (m, k), None when there are none;
+    ``files/regions.png`` shows the regions on the scan."""
 
     E: np.ndarray
     nu: np.ndarray
@@ -46,12 +40,16 @@ class MaterialsOutput:
     tet_labels: np.ndarray
     scan_labels: np.ndarray
     region_names: list[str]
+    extra_names: list[str] = field(default_factory=list)
+    extra_values: np.ndarray | None = None
 
     def materials(self) -> TetMaterials:
         """The per-tet values as :class:`~physanim.fem.materials.TetMaterials`."""
         from physanim.fem.materials import TetMaterials
 
-        return TetMaterials(self.E, self.nu, self.eta, self.rho)
+        columns = () if self.extra_values is None else self.extra_values.T
+        extra = dict(zip(self.extra_names, columns, strict=True))
+        return TetMaterials(self.E, self.nu, self.eta, self.rho, extra)
 
 
 def compute(
@@ -84,14 +82,16 @@ def compute(
     )
     areas = region_areas(scan_v, scan_f, scan_labels)
     names = ["default", *REGION_NAMES]
-    ctx.summary.update(
+    summary = dict(
         model=params.model.name,
         region_area_cm2={n: round(float(a) * 1e4, 3) for n, a in zip(names, areas, strict=True)},
         tets_per_region={n: int((labels == i).sum()) for i, n in enumerate(names)},
     )
+    extra = np.column_stack(list(mats.extra.values())) if mats.extra else None
     return MaterialsOutput(
-        mats.E, mats.nu, mats.eta, mats.rho, labels.astype(np.int8), scan_labels, names
-    )
+        mats.E, mats.nu, mats.eta, mats.rho, labels.astype(np.int8), scan_labels, names,
+        list(mats.extra), extra, summary=summary,
+    )  # fmt: skip
 
 
 def model_name(params: MaterialsStageParams) -> str:

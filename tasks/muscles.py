@@ -7,14 +7,14 @@ from typing import TYPE_CHECKING
 
 from physanim.muscle.arm import ArmResult
 from physanim.muscle.params import ArmConditions
-from physanim.pipeline import StageContext, StageSpec
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 
 if TYPE_CHECKING:
     from physanim.muscle.arm import TorqueShortfall
 
 
 @dataclass(frozen=True)
-class MusclesOutput:
+class MusclesOutput(StageOutput):
     """Every arm condition solved: condition name -> :class:`~physanim.muscle.arm.ArmResult`
     (time axis first, SI units), stored as one group per condition."""
 
@@ -63,15 +63,17 @@ def compute(params: ArmConditions, ctx: StageContext[ArmConditions]) -> MusclesO
             ]
             warnings += [shortfall_warning(name, g) for g in gaps]
         report(i + 1, len(studies))
-    ctx.summary["peak_activation"] = peaks
-    ctx.summary["max_torque_residual_Nm"] = max(
-        float(abs(r.torque_residual).max()) for r in results.values()
-    )
-    ctx.summary["feasible"] = not infeasible
-    ctx.summary["infeasible"] = infeasible
+    summary = {
+        "peak_activation": peaks,
+        "max_torque_residual_Nm": max(
+            float(abs(r.torque_residual).max()) for r in results.values()
+        ),
+        "feasible": not infeasible,
+        "infeasible": infeasible,
+    }
     if warnings:
-        ctx.summary["warnings"] = warnings
-    return MusclesOutput(results)
+        summary["warnings"] = warnings
+    return MusclesOutput(results, summary=summary)
 
 
 SPEC = StageSpec.typed(

@@ -12,10 +12,10 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
-from physanim.evaluate.face import FaceEvaluation
-from physanim.pipeline import StageContext, StageSpec
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 from physanim.render.face_panel import PanelParams
 from tasks.align import AlignOutput
+from tasks.evaluate import EvaluateOutput
 from tasks.ingest import IngestOutput
 from tasks.simulate import SimulateOutput
 from tasks.tetra import TetraOutput
@@ -35,7 +35,7 @@ FILES = {
 
 
 @dataclass(frozen=True)
-class RenderOutput:
+class RenderOutput(StageOutput):
     """The render's summary figures (its frames, video and plots are files, see ``FILES``):
     ``frames`` rendered, ``video`` file name, ``codec``."""
 
@@ -51,7 +51,7 @@ def compute(
     align: AlignOutput,
     tetra: TetraOutput,
     simulate: SimulateOutput,
-    evaluate: FaceEvaluation,
+    evaluate: EvaluateOutput,
     tiles: TilesOutput,
     ctx: StageContext[PanelParams],
 ) -> RenderOutput:
@@ -78,13 +78,13 @@ def compute(
         done = render_face_panel(footage, params, ctx.files_dir, embeddings, ctx.progress, peaks)
         plots.result()
     n = len(done.frames)
-    ctx.summary.update(
+    summary = dict(
         frames=n,
         video=done.video.name,
         codec=done.codec,
         render_s_per_frame=round(done.render_s / max(n, 1), 4),
     )
-    return RenderOutput(frames=n, video=done.video.name, codec=done.codec)
+    return RenderOutput(frames=n, video=done.video.name, codec=done.codec, summary=summary)
 
 
 SPEC = StageSpec.typed(

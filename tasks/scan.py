@@ -15,7 +15,7 @@ import numpy as np
 from pydantic import ConfigDict, Field
 
 from physanim.mesh.params import ScanParams
-from physanim.pipeline import DatasetParams, StageContext, StageSpec
+from physanim.pipeline import DatasetParams, StageContext, StageOutput, StageSpec
 
 
 class ScanStageParams(ScanParams):
@@ -30,7 +30,7 @@ class ScanStageParams(ScanParams):
 
 
 @dataclass(frozen=True)
-class ScanOutput:
+class ScanOutput(StageOutput):
     """The prepared scan: ``vertices`` (N, 3) m, ``faces`` (F, 3), one component with one
     open border (before the lip seam cut, which ``align`` makes)."""
 
@@ -61,8 +61,8 @@ def compute(params: ScanStageParams, ctx: StageContext[ScanStageParams]) -> Scan
         params.notch_max_gap_m, params.notch_min_depth_m,
     )  # fmt: skip
     report(1, 1)
-    ctx.summary.update(raw_vertices=len(raw_v), vertices=len(vertices), faces=len(faces))
-    return ScanOutput(vertices, faces)
+    summary = dict(raw_vertices=len(raw_v), vertices=len(vertices), faces=len(faces))
+    return ScanOutput(vertices, faces, summary=summary)
 
 
 SPEC = StageSpec.typed(

@@ -3,27 +3,16 @@
 The boundary conditions come from the library (``physanim.face.drive``): skull nodes fixed,
 mandible nodes turned by the jaw rotation estimated from the tracked landmarks, and the skin
 pulled by landmark springs (default), by the kinematic scan, or prescribed at single nodes (the
-seed, ``configs/drives/seed.yaml``), chosen by ``physanim.face.performance``.  Outputs at the
-capture frame rate. With ``simulate.reduced.enabled`` the tissue runs in a reduced (POD) model
-built from a full run of a basis material instead (``tasks.preview``), for fast previews.
-
-Version 4: the output is declared by :class:`SimulateOutput`; a disabled jaw is stored as a
-null ``jaw`` attribute (before: absent).
-
-Version 5: bone-side nodes next to the upper lip follow the mandible less, by the share of
-upper-lip nodes in their tets (``physanim.face.jaw.neighbour_share``), so no tet at the end of
-the lip seam joins weights 0 and ~1 (peak / 99th-percentile stress on the demo 5.29 -> 4.62,
-fidelity and philtrum peaks unchanged to 1e-3).
-
-Version 6: adaptive steps by Zienkiewicz-Xie's error estimate with the drive's path (one step
-per frame on the demo instead of two plus a check, 0.5 % of peak against dt = 0.5 ms), and the
-jaw's least squares with a sparse Jacobian (angles within 2e-4 degrees of before).
+seed, ``configs/drives/seed.yaml``), chosen by ``physanim.face.performance``. They and the
+tissue mesh and materials form a :class:`~physanim.fem.problem.FemProblem`, solved by
+``physanim.fem.simulate`` at the capture frame rate, or with ``simulate.reduced.enabled`` in a
+reduced (POD) basis built from a full run of a basis material (``physanim.fem.preview``), for
+fast previews of material edits. Version history: CHANGELOG.md.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from pydantic import (
@@ -34,14 +23,16 @@ from pydantic import (
     model_validator,
 )
 
+from physanim.face.drive import FaceDrive
 from physanim.face.jaw import JawMotion
 from physanim.face.params import DriveParams, JawParams
 from physanim.fem.params import SimulateParams
-from physanim.fem.simulate import SimResult, simulate
-from physanim.pipeline import StageContext, StageSpec
+from physanim.fem.preview import ReducedParams
+from physanim.fem.problem import FemProblem
+from physanim.fem.simulate import SimResult
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 from tasks.align import AlignOutput
 from tasks.materials import MaterialsOutput
-from tasks.preview import ReducedParams
 from tasks.tetra import TetraOutput
 from tasks.track import TrackOutput
 
@@ -74,7 +65,7 @@ class SimulateStageParams(SimulateParams):
 
 
 @dataclass(frozen=True, kw_only=True)
-class SimulateOutput(SimResult):
+class SimulateOutput(SimResult, StageOutput):
     """The tissue's motion at the capture frame rate (T frames, n nodes, m tets): every field
     of :class:`~physanim.fem.simulate.SimResult` (displacements (T, n, 3) float32 m, energies
     J, von Mises max and 99th percentile Pa, inverted tets, steps, timings s) plus the boundary
@@ -98,9 +89,9 @@ def simulate_inputs(
     tetra: TetraOutput,
     materials: MaterialsOutput,
     params: SimulateStageParams,
-) -> tuple[dict[str, Any], Any]:
-    """Arguments of ``physanim.fem.simulate`` from the track, align, tetra and materials
-    outputs, and the :class:`~physanim.face.drive.FaceDrive` they came from."""
+) -> tuple[FemProblem, FaceDrive]:
+    """The FEM problem of the track, align, tetra and materials outputs, and the
+    :class:`~physanim.face.drive.FaceDrive` its boundary conditions came from."""
     from physanim.face.performance import landmark_motion, performance_drive
     from physanim.names import name_index
 
@@ -113,16 +104,11 @@ def simulate_inputs(
         (align.scan_vertices, align.scan_faces), lambda: align.kinematic[...],
         params.drive, params.jaw,
     )  # fmt: skip
-    args = {
-        "nodes": tetra.nodes,
-        "tets": tetra.tets,
-        "materials": materials.materials(),
-        "driven_idx": drive.prescribed,
-        "driven_traj": drive.prescribed_traj,
-        "frame_dt": 1.0 / float(track.fps),
-        "springs": drive.springs,
-    }
-    return args, drive
+    problem = FemProblem.driven(
+        tetra.nodes, tetra.tets, materials.materials(), drive.prescribed,
+        drive.prescribed_traj, 1.0 / float(track.fps), springs=drive.springs,
+    )  # fmt: skip
+    return problem, drive
 
 
 def compute(
@@ -136,14 +122,18 @@ def compute(
     """displacements (T,n,3) float32 m, energies (T,) J, von Mises max and 99th percentile
     (T,) Pa, the jaw's angle (T,) rad / pivot / axis, the driven and spring nodes."""
     from physanim.face.performance import performance_summary
+    from physanim.fem.simulate import simulate_problem
 
-    args, drive = simulate_inputs(track, align, tetra, materials, params)
+    problem, drive = simulate_inputs(track, align, tetra, materials, params)
     if params.reduced.enabled:
-        from tasks.preview import preview
+        from physanim.fem.preview import preview
 
-        result, reduced_summary = preview(ctx, args, materials)
+        result, reduced_summary = preview(
+            problem, materials.tet_labels, materials.region_names, params, params.reduced,
+            ctx.dataset.run_dir / "cache" / "reduced-basis", ctx.progress("simulate (reduced)"),
+        )  # fmt: skip
     else:
-        result = simulate(**args, params=params, progress=ctx.progress("simulate"))
+        result = simulate_problem(problem, params, ctx.progress("simulate"))
     summary = performance_summary(result, drive, int(tetra.skin.sum()), params, params.drive.mode)
     if params.reduced.enabled:
         summary.update(
@@ -154,7 +144,6 @@ def compute(
         )
         for k in ("frames_over_tolerance", "solver_threads", "blas"):
             summary.pop(k)
-    ctx.summary.update(summary)
     springs = drive.springs
     return SimulateOutput(
         **vars(result),  # the SimResult fields
@@ -165,6 +154,7 @@ def compute(
         spring_stiffness=springs.stiffness if springs else np.zeros(0),
         driving_landmarks=list(drive.landmarks),
         jaw=drive.jaw,
+        summary=summary,
     )
 
 

@@ -11,12 +11,12 @@ from typing import Any
 import numpy as np
 
 from physanim.mesh.params import TetraParams
-from physanim.pipeline import StageContext, StageSpec
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 from tasks.align import AlignOutput
 
 
 @dataclass(frozen=True)
-class TetraOutput:
+class TetraOutput(StageOutput):
     """The tissue volume: ``nodes`` (n, 3) m, ``tets`` (m, 4), cut along the lip seam;
     ``skin`` / ``bone`` (n,) bool masks; ``side`` (n,) lip side; ``landmark_node`` (L,) the
     skin node of each of align's landmarks, ``landmark_distance`` (L,) m from it;
@@ -67,12 +67,13 @@ def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraPara
     landmark_node, landmark_distance = landmark_nodes(
         nodes, skin, cut.side, align.landmarks, mouth.side(align.landmarks)
     )
-    ctx.summary.update(
+    summary = dict(
         quality.as_dict(), lip_seam_faces=cut.n_seam_faces, seam_nodes=len(nodes) - len(mesh.nodes)
     )
     return TetraOutput(
         nodes, cut.elements, skin, bone, cut.side, landmark_node, landmark_distance,
         skin_anchors(nodes, bone, surface), surface.thickness, quality.as_dict(),
+        summary=summary,
     )  # fmt: skip
 
 

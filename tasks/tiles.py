@@ -11,13 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from physanim.pipeline import StageContext, StageSpec
+from physanim.pipeline import StageContext, StageOutput, StageSpec
 from physanim.render.face_panel import FIT_TITLE, KINEMATIC_TITLE, TileParams
 from tasks.align import AlignOutput
 
 
 @dataclass(frozen=True)
-class TilesOutput:
+class TilesOutput(StageOutput):
     """R rendered frames: ``frames`` (R,) their indices, ``fit`` and ``kinematic`` (R, H, W,
     3) uint8 RGB tiles of the fitted motion mesh and of the kinematic scan."""
 

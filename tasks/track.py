@@ -10,7 +10,7 @@ from typing import Literal
 import numpy as np
 from pydantic import ConfigDict, Field
 
-from physanim.pipeline import DatasetParams, StageContext, StageSpec
+from physanim.pipeline import DatasetParams, StageContext, StageOutput, StageSpec
 from physanim.tracking.params import TrackParams
 from tasks.ingest import IngestOutput
 
@@ -29,7 +29,7 @@ class TrackStageParams(TrackParams):
 
 
 @dataclass(frozen=True)
-class TrackOutput:
+class TrackOutput(StageOutput):
     """K landmarks tracked over T frames (``physanim.tracking.track.Tracks`` plus what they are).
 
     ``uv`` (T, K, 2) px and ``points`` (T, K, 3) m camera frame, NaN where unobserved;
@@ -88,14 +88,14 @@ def compute(
         ctx.progress("track"),
     )  # fmt: skip
     tracks = found.tracks
-    ctx.summary.update(
+    summary = dict(
         markers=len(found.names),
         tracked_fraction=round(float((tracks.confidence > 0).mean()), 4),
         warnings=found.problems,
     )
     return TrackOutput(
         tracks.uv, tracks.points, tracks.confidence, tracks.head_pose, found.template,
-        found.names, float(ingest.fps), params.backend, params.lift,
+        found.names, float(ingest.fps), params.backend, params.lift, summary=summary,
     )  # fmt: skip
 
 

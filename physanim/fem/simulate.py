@@ -17,7 +17,7 @@ import numba
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from physanim.fem.boundary import BoundaryConditions, SpringDrive
+from physanim.fem.boundary import SpringDrive
 from physanim.fem.kinematics import kinematics
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel, build_model
@@ -25,6 +25,7 @@ from physanim.fem.monitors import EnergyMonitor, InversionMonitor, StressMonitor
 from physanim.fem.numba_threads import ThreadTrials, faster_thread_count, keeps_thread_count
 from physanim.fem.parallel_spmv import ParallelCSR
 from physanim.fem.params import SimulateParams
+from physanim.fem.problem import FemProblem
 from physanim.fem.stepping import FrameStepper, IntegratorCache, initial_state, substep_levels
 
 
@@ -83,7 +84,6 @@ def hot_spot_ratio(result: SimResult, min_fraction: float = 0.05) -> float:
     return float(np.max(vm[loaded] / np.maximum(p99[loaded], 1e-300)))
 
 
-@keeps_thread_count
 def simulate(
     nodes: np.ndarray,
     tets: np.ndarray,
@@ -103,22 +103,38 @@ def simulate(
     node ids; driven_traj (T, n_d, 3) displacements from rest in m at frame times k frame_dt
     (s), interpolated between frames by Catmull-Rom splines; fixed_idx (n_f,) node ids held at
     zero displacement. ``springs`` optionally pulls free nodes towards moving targets (soft
-    constraints, same frame times and interpolation). All other nodes are free. The first
-    frame is the static equilibrium for driven_traj[0] and the springs' first targets.
-    ``model`` may pass a prebuilt ``build_model`` result (e.g. another constitutive law or
-    element formulation: ``build_model(..., law=..., element=...)``).
+    constraints, same frame times and interpolation). All other nodes are free. The arrays
+    form a :class:`FemProblem`, solved by :func:`simulate_problem`.
+    """
+    problem = FemProblem.driven(
+        nodes, tets, materials, driven_idx, driven_traj, frame_dt, fixed_idx, springs
+    )
+    return simulate_problem(problem, params, progress, model)
+
+
+@keeps_thread_count
+def simulate_problem(
+    problem: FemProblem,
+    params: SimulateParams | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    model: FemModel | None = None,
+) -> SimResult:
+    """Solve ``problem`` at its frame times. The first frame is the static equilibrium for
+    the first prescribed displacements and the springs' first targets. ``model`` may pass a
+    prebuilt ``build_model`` result (e.g. another element formulation:
+    ``build_model(..., element=...)``); by default the model is ``params``' law and element.
 
     On cores busy with other processes one thread can beat all of numba's: the run uses the
     faster (checked before factorising, then on one frame in 30: ``SimResult.solver_threads``).
     """
     params = params or SimulateParams()
     t0 = time.perf_counter()
-    model = model or build_model(nodes, tets, materials, params)
+    model = model or build_model(problem.nodes, problem.tets, problem.materials, params)
     t_asm = time.perf_counter() - t0
     n_nodes = len(model.nodes)
-    bc = BoundaryConditions.checked(n_nodes, driven_idx, driven_traj, frame_dt, fixed_idx, springs)
+    bc, frame_dt = problem.conditions, problem.frame_dt
     kin = kinematics(model, params)
-    if springs is not None and not kin.springs:
+    if bc.springs is not None and not kin.springs:
         raise ValueError("springs are not supported with the corotational option")
     levels = substep_levels(frame_dt, params, kin.adaptive)
     n_frames, pres = bc.n_frames, bc.prescribed_dofs

@@ -12,7 +12,14 @@ from physanim.pipeline.executor import (
 )
 from physanim.pipeline.plan import PlanEntry, make_plan
 from physanim.pipeline.runner import StageFailed, StageResult, execute_stage, record_run
-from physanim.pipeline.spec import DatasetParams, Pipeline, PipelineConfig, StageSpec
+from physanim.pipeline.spec import (
+    DatasetParams,
+    Pipeline,
+    PipelineConfig,
+    StageOutput,
+    StageSpec,
+    Summary,
+)
 
 __all__ = [
     "DatasetParams",
@@ -26,8 +33,10 @@ __all__ = [
     "ProgressFn",
     "StageContext",
     "StageFailed",
+    "StageOutput",
     "StageResult",
     "StageSpec",
+    "Summary",
     "execute_plan_locally",
     "execute_stage",
     "make_plan",

@@ -44,7 +44,6 @@ class StageContext(Generic[P]):
     dataset: DatasetParams
     out: zarr.Group
     progress: ProgressFactory = field(default=_no_progress)
-    summary: dict[str, object] = field(default_factory=dict)
 
     def input(self, stage: str) -> zarr.Group:
         """The output group of upstream ``stage`` (read-only)."""

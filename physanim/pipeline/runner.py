@@ -94,14 +94,14 @@ def execute_stage(
             progress=progress or _no_progress,
         )
         try:
-            spec.compute(ctx)
+            summary = dict(spec.compute(ctx) or {})
         except Exception as exc:
             raise StageFailed(spec.name, exc) from exc
-        if ctx.summary:
-            group.attrs["summary"] = ctx.summary
+        if summary:
+            group.attrs["summary"] = summary
     seconds = time.perf_counter() - t0
     return StageResult(
-        spec.name, entry.key, "ran", seconds, ctx.summary, started, f"{_HOST}:{os.getpid()}"
+        spec.name, entry.key, "ran", seconds, summary, started, f"{_HOST}:{os.getpid()}"
     )
 
 

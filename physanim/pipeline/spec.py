@@ -68,12 +68,26 @@ def dataset_overrides(dataset: str) -> list[str]:
     return [f"dataset.name={dataset}"]
 
 
+#: what a stage's compute returns beside its arrays: JSON-able facts the CLI prints and the
+#: report tabulates, stored as its output group's ``summary`` attribute
+Summary = Mapping[str, Any]
+
+
+@dataclass(frozen=True, kw_only=True)
+class StageOutput:
+    """Base of a typed stage's output dataclass: ``summary`` (JSON-able, name -> value) is
+    part of the output, stored as the group's ``summary`` attribute and read back with it."""
+
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
 @dataclass(frozen=True)
 class TypedCompute:
     """The ``compute(ctx)`` of a typed stage (what the runner calls).
 
     Reads each upstream output as the dataclass ``function`` declares for it, calls
-    ``function(params, **upstream outputs[, ctx=ctx])`` and writes the dataclass it returns.
+    ``function(params, **upstream outputs[, ctx=ctx])``, writes the :class:`StageOutput` it
+    returns and returns its summary.
     A plain frozen dataclass of module-level objects, so a stage pickles to Dask workers.
     """
 
@@ -82,7 +96,7 @@ class TypedCompute:
     output: type
     wants_ctx: bool
 
-    def __call__(self, ctx: StageContext[Any]) -> None:
+    def __call__(self, ctx: StageContext[Any]) -> Summary:
         kwargs: dict[str, Any] = {name: ctx.read(name, cls) for name, cls in self.inputs}
         if self.wants_ctx:
             kwargs["ctx"] = ctx
@@ -93,11 +107,14 @@ class TypedCompute:
                 f"declared {self.output.__name__}"
             )
         ctx.write_record(result)
+        return result.summary
 
 
 @dataclass(frozen=True)
 class StageSpec(Generic[P]):
     """One stage: its name, upstream stages, params model, code version and compute function.
+
+    ``compute(ctx)`` writes the output group and returns its summary (or None).
 
     ``version`` is bumped by hand whenever the stage's code changes its output; it is part of
     the content key.  ``fingerprint`` optionally returns JSON-able facts about input files
@@ -117,7 +134,7 @@ class StageSpec(Generic[P]):
     upstream: tuple[str, ...]
     params: type[P]
     version: str
-    compute: Callable[[StageContext[P]], None]
+    compute: Callable[[StageContext[P]], Summary | None]
     doc: str = ""
     fingerprint: Callable[[DatasetParams, P], Mapping[str, Any]] | None = None
     output: type | None = None
@@ -166,6 +183,8 @@ class StageSpec(Generic[P]):
         for what, t in (("output", output), *inputs):
             if not dataclasses.is_dataclass(t):
                 raise TypeError(f"stage {name}: {what} is annotated {t!r}, not a dataclass")
+        if not (isinstance(output, type) and issubclass(output, StageOutput)):
+            raise TypeError(f"stage {name}: its output {output!r} must subclass StageOutput")
         run = TypedCompute(compute, inputs, output, "ctx" in names)
         return cls(
             name, tuple(n for n, _ in inputs), hints[names[0]], version, run, doc,
@@ -179,10 +198,12 @@ class StageSpec(Generic[P]):
 
 
 def describe_output(cls: type | None) -> str:
-    """``Name(field, field, ...)`` of an output dataclass; ``group`` for an untyped stage."""
+    """``Name(field, field, ...)`` of an output dataclass (the summary every output has left
+    out); ``group`` for an untyped stage."""
     if cls is None:
         return "group"
-    return f"{cls.__name__}({', '.join(f.name for f in dataclasses.fields(cls))})"
+    names = [f.name for f in dataclasses.fields(cls) if f.name != "summary"]
+    return f"{cls.__name__}({', '.join(names)})"
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,10 @@
-"""The library's import graph: no cycles, no upward imports, no Prefect / flows / tasks.
+"""The import graph of the library and the layers above it: no cycles, no upward imports.
 
-Walks every module of ``physanim`` with ``ast`` (imports inside functions included) and
-checks each import of another physanim module against the layer order below.
+Walks every module of ``physanim``, ``tasks``, ``flows`` and ``cli`` with ``ast`` (imports
+inside functions included) and checks each import of another of their modules against the
+layer order below: inside the library by subpackage (``LAYERS``), above it by package
+(``PACKAGES``). The stage layer (``tasks``) never touches the stage store: a stage reads other
+stages' outputs only through its declared inputs.
 """
 
 from __future__ import annotations
@@ -11,7 +14,10 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2] / "physanim"
+REPO = Path(__file__).resolve().parents[2]
+ROOT = REPO / "physanim"
+#: the packages, lowest first: each imports only lower ones (and itself), never a cycle
+PACKAGES = ["physanim", "tasks", "flows", "cli"]
 
 #: Layers, lowest first. A unit (a subpackage, or a top-level module of ``physanim``) may
 #: import its own modules and any unit of a LOWER layer, never one of its own layer or above.
@@ -31,12 +37,12 @@ FORBIDDEN = ("prefect", "flows", "tasks", "cli")
 
 
 def _module_name(path: Path) -> str:
-    parts = path.relative_to(ROOT.parent).with_suffix("").parts
+    parts = path.relative_to(REPO).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def _modules() -> dict[str, Path]:
-    return {_module_name(p): p for p in sorted(ROOT.rglob("*.py"))}
+def _modules(packages: list[str] = PACKAGES[:1]) -> dict[str, Path]:
+    return {_module_name(p): p for pkg in packages for p in sorted((REPO / pkg).rglob("*.py"))}
 
 
 def _type_only(tree: ast.Module) -> set[ast.AST]:
@@ -69,8 +75,9 @@ def _imports(path: Path, name: str, known: dict[str, Path]) -> set[str]:
     return found
 
 
-def _graph() -> tuple[dict[str, set[str]], dict[str, set[str]]]:
-    known = _modules()
+def _graph(packages: list[str] = PACKAGES[:1]) -> tuple[dict[str, set[str]], dict[str, set[str]]]:
+    """(module -> the modules of ``packages`` it imports, module -> other top-level names)."""
+    known = _modules(packages)
     internal, external = {}, {}
     for name, path in known.items():
         imports = _imports(path, name, known)
@@ -151,9 +158,70 @@ def test_library_never_imports_prefect_flows_or_tasks() -> None:
     assert not bad, "\n".join(bad)
 
 
-def test_checks_can_fail() -> None:
-    """The checks see a loop and an upward arrow when there is one."""
+def test_no_import_cycles_and_no_upward_imports_across_the_packages() -> None:
+    """physanim < tasks < flows < cli: no module cycle anywhere, no package imports a higher
+    one (the CLI may import flows, the flows the stages, the stages the library)."""
+    internal, _ = _graph(PACKAGES)
+    cycle = _cycle(internal)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
+    rank = {pkg: i for i, pkg in enumerate(PACKAGES)}
+    upward = [
+        f"{m} -> {t}"
+        for m, targets in sorted(internal.items())
+        for t in sorted(targets)
+        if rank[t.split(".")[0]] > rank[m.split(".")[0]]
+    ]
+    assert not upward, "imports of a higher package:\n" + "\n".join(upward)
+
+
+#: what a stage module may not use: the store and its codec, and keys computed by hand
+STORE_NAMES = {"StageStore", "read_dataclass", "write_dataclass", "write_array", "stage_key"}
+STORE_MODULES = ("physanim.store.stage_store", "physanim.store.codec", "physanim.pipeline.plan")
+
+
+def _store_access(path: Path) -> list[str]:
+    """Lines of ``path`` that reach the stage store: ``<x>.store``, a store class or codec
+    function imported, a store or planner module imported."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Attribute) and node.attr == "store":
+            found.append(f"{path.name}:{node.lineno} .store")
+        elif isinstance(node, ast.ImportFrom):
+            names = {a.name for a in node.names} & STORE_NAMES
+            if names or (node.module or "").startswith(STORE_MODULES):
+                found.append(f"{path.name}:{node.lineno} from {node.module} import {names}")
+        elif isinstance(node, ast.Import) and any(
+            a.name.startswith(STORE_MODULES) for a in node.names
+        ):
+            found.append(f"{path.name}:{node.lineno} import")
+    return found
+
+
+def test_stages_never_touch_the_store() -> None:
+    """``tasks/`` reads inputs as typed arguments and returns its output: it opens no store
+    group, computes no key and reads no other stage's output by hand."""
+    bad = [hit for p in sorted((REPO / "tasks").glob("*.py")) for hit in _store_access(p)]
+    assert not bad, "stage modules reaching the store:\n" + "\n".join(bad)
+
+
+def test_no_type_ignore_in_production_code() -> None:
+    """No ``type: ignore`` in the library, the stages, the flows or the CLI."""
+    hits = [
+        f"{p.relative_to(REPO)}:{i}"
+        for pkg in PACKAGES
+        for p in sorted((REPO / pkg).rglob("*.py"))
+        for i, line in enumerate(p.read_text().splitlines(), 1)
+        if "type: ignore" in line
+    ]
+    assert not hits, "\n".join(hits)
+
+
+def test_checks_can_fail(tmp_path: Path) -> None:
+    """The checks see a loop, an upward arrow and a store access when there is one."""
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _layer("fem") > _layer("mesh")
     with pytest.raises(AssertionError, match="no layer"):
         _layer("not_a_package")
+    stage = tmp_path / "stage.py"
+    stage.write_text("from physanim.store import read_dataclass\nx = ctx.store.open('a')\n")
+    assert len(_store_access(stage)) == 2

@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 from pydantic import BaseModel
 
-from physanim.pipeline import Pipeline, StageSpec, execute_plan_locally, make_plan, stage_inputs
+from physanim.pipeline import (
+    Pipeline,
+    StageOutput,
+    StageSpec,
+    execute_plan_locally,
+    make_plan,
+    stage_inputs,
+)
 from physanim.store import StageStore, read_dataclass
 
 
@@ -20,7 +27,7 @@ class GainParams(BaseModel):
 
 
 @dataclass(frozen=True)
-class Ramp:
+class Ramp(StageOutput):
     values: np.ndarray  # (n,) m
     unit: str
 
@@ -30,7 +37,8 @@ def ramp(params: RampParams) -> Ramp:
 
 
 def gain(params: GainParams, ramp: Ramp) -> Ramp:
-    return Ramp(ramp.values * params.gain, ramp.unit)
+    values = ramp.values * params.gain
+    return Ramp(values, ramp.unit, summary={"peak_m": float(values.max())})
 
 
 STAGES = (StageSpec.typed("ramp", ramp, "1"), StageSpec.typed("gain", gain, "1"))
@@ -43,6 +51,9 @@ def test_toy_typed_stage_runs_through_the_runner_and_store(tmp_path):
     execute_plan_locally(TWO, config, make_plan(TWO, config, store))
     out = read_dataclass(Ramp, store.open("gain"))
     np.testing.assert_array_equal(out.values, [0.0, 3.0, 6.0, 9.0, 12.0])
+    # the summary is part of the output: stored with it, read back with it
+    assert out.summary == {"peak_m": 12.0} == store.provenance("gain")["summary"]
+    assert read_dataclass(Ramp, store.open("ramp")).summary == {}
     assert out.unit == "m" and TWO.stage("gain").inputs == {"ramp": Ramp}
     assert "ramp -->|Ramp| gain" in TWO.mermaid() and "<- ramp: Ramp(values, unit)" in TWO.text()
 
@@ -52,15 +63,24 @@ def test_an_edge_whose_types_disagree_is_refused() -> None:
 
     def scaled(params: GainParams, ramp: Ramp) -> Scaled: ...
 
+    def plain(params: GainParams) -> Plain: ...
+
     with pytest.raises(TypeError, match="ramp is annotated .*GainParams.*not a dataclass"):
         StageSpec.typed("wrong", wrong, "1")
+    with pytest.raises(TypeError, match="must subclass StageOutput"):
+        StageSpec.typed("plain", plain, "1")
     with pytest.raises(ValueError, match="total reads gain as Ramp, but gain stores Scaled"):
         stages = (*STAGES[:1], StageSpec.typed("gain", scaled, "1"))
         Pipeline("bad", (*stages, StageSpec.typed("total", total, "1")), Path("bad.yaml"))
 
 
 @dataclass(frozen=True)
-class Scaled:
+class Scaled(StageOutput):
+    values: np.ndarray
+
+
+@dataclass(frozen=True)
+class Plain:
     values: np.ndarray
 
 

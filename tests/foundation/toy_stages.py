@@ -60,10 +60,10 @@ def scale(ctx: StageContext) -> None:
     ctx.write("scaled", ramp * ctx.params.factor)  # type: ignore[attr-defined]
 
 
-def total(ctx: StageContext) -> None:
+def total(ctx: StageContext) -> dict[str, float]:
     _log("total")
     ctx.write("total", np.array([ctx.input("scale")["scaled"][:].sum()]))
-    ctx.summary["total"] = float(ctx.input("scale")["scaled"][:].sum())
+    return {"total": float(ctx.input("scale")["scaled"][:].sum())}
 
 
 #: The toy DAG as the CLI addresses it: ``--pipeline tests.foundation.toy_stages:TOY``.
