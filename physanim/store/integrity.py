@@ -1,0 +1,226 @@
+"""Integrity of the store: output manifests, damage and staleness, the quarantine
+(``.quarantine/``), abandoned temporaries (``.tmp/``) and atomic small-file writes.
+
+The layout and the guarantees these checks uphold are described in ``stage_store``.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import json
+import os
+import shutil
+import time
+import uuid
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from physanim.processes import process_alive
+
+TMP = ".tmp"
+QUARANTINE = ".quarantine"
+#: Age after which a temporary output of another host is considered abandoned, seconds.
+STALE_FOREIGN_S = 24 * 3600
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write a small text file by renaming a complete temporary copy into place."""
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}")
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def ensure_group(path: Path) -> None:
+    """Make ``path`` an (empty) Zarr v3 group if it is not one; safe when processes race.
+
+    The metadata is written to a temporary file and renamed into place, so a concurrent
+    reader never sees a half-written zarr.json (Zarr's own writer gives no such guarantee).
+    """
+    meta = path / "zarr.json"
+    if meta.exists():
+        return
+    path.mkdir(parents=True, exist_ok=True)
+    write_atomic(meta, json.dumps({"zarr_format": 3, "node_type": "group", "attributes": {}}))
+
+
+def _sha256(path: Path) -> str:
+    with path.open("rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
+def build_manifest(group_dir: Path) -> dict[str, list[Any]]:
+    """Relative path -> [size in bytes, SHA-256] of every file of an output group except its
+    own ``zarr.json`` (written last, with this manifest in it)."""
+    out = {}
+    for p in sorted(group_dir.rglob("*")):
+        rel = p.relative_to(group_dir).as_posix()
+        if p.is_file() and rel != "zarr.json":
+            out[rel] = [p.stat().st_size, _sha256(p)]
+    return out
+
+
+def _part(rel: str, manifest: Mapping[str, Any]) -> str:
+    """``array 'a/b' chunk c/1/0/0``, ``metadata of array 'a'`` or ``file files/x.png``."""
+    parts = rel.split("/")
+    for n in range(len(parts) - 1, 0, -1):
+        node = "/".join(parts[:n])
+        if f"{node}/zarr.json" in manifest:
+            rest = "/".join(parts[n:])
+            return f"array '{node}' chunk {rest}" if rest != "zarr.json" else f"metadata {rel}"
+    if parts[-1] == "zarr.json":
+        return f"metadata {rel}"
+    return f"file {rel}"
+
+
+def _owner(name: str) -> tuple[str, int] | None:
+    """(host, pid) of a ``.tmp`` entry named ``...-<host>-<pid>-<random>``, else None."""
+    parts = name.split("-")
+    skip = 3 if parts[0] in ("trash", "replaced") else 2
+    try:
+        return "-".join(parts[skip:-2]), int(parts[-2])
+    except (ValueError, IndexError):
+        return None
+
+
+class StoreIntegrity:
+    """The integrity checks and housekeeping of ``StageStore`` (mixed into it)."""
+
+    root: Path
+    _host: str
+
+    if TYPE_CHECKING:
+
+        def _path(self, stage: str, key: str) -> Path: ...
+
+    def damage(self, stage: str, key: str, *, checksums: bool = False) -> str | None:
+        """What is wrong with the group at ``<stage>/<key>``; None when it is absent or intact.
+
+        Checks that the metadata reads, that the output was committed complete and that every
+        file of its manifest is present with its size (and, with ``checksums``, its SHA-256),
+        then that no output it was computed from has been replaced by different content since.
+        Outputs written before manifests existed are taken as they are.
+        """
+        path = self._path(stage, key)
+        if not path.is_dir():
+            return None
+        meta = path / "zarr.json"
+        try:
+            attrs = json.loads(meta.read_text()).get("attributes", {})
+        except FileNotFoundError:
+            return f"metadata {meta} is missing"
+        except (ValueError, OSError, AttributeError) as exc:
+            return f"metadata {meta} is unreadable ({exc})"
+        if not attrs.get("complete"):
+            return "incomplete (complete=false): left by an interrupted or failed writer"
+        manifest = attrs.get("manifest")
+        if manifest is None:
+            return None
+        problem = self._file_damage(path, meta, manifest, checksums)
+        return problem if problem is not None else self._staleness(attrs)
+
+    def _file_damage(self, path: Path, meta: Path, manifest: Any, checksums: bool) -> str | None:
+        """The first file of ``manifest`` missing, resized or (``checksums``) altered."""
+        try:
+            files = [(rel, int(size), str(digest)) for rel, (size, digest) in manifest.items()]
+        except (AttributeError, TypeError, ValueError):
+            return f"metadata {meta}: the manifest is unreadable"
+        for rel, size, digest in files:
+            f = path / rel
+            try:
+                got = f.stat().st_size
+            except FileNotFoundError:
+                return f"{_part(rel, manifest)} is missing"
+            if got != size:
+                return f"{_part(rel, manifest)} has {got} bytes, expected {size}"
+            if checksums and _sha256(f) != digest:
+                return f"{_part(rel, manifest)} does not match its checksum"
+        return None
+
+    def _staleness(self, attrs: Mapping[str, Any]) -> str | None:
+        """Why an output no longer follows from its inputs: an upstream output it was computed
+        from has since been replaced by different content (``--force`` of a stage whose result
+        varies from run to run, such as fTetWild's mesh); None when every input is unchanged."""
+        for stage, made_from in (attrs.get("varying_inputs") or {}).items():
+            key = made_from.get("key") or ""
+            now = self.content_digest(stage, key) if key else None
+            if now is not None and now != made_from.get("digest"):
+                return (
+                    f"stale: computed from an earlier output of {stage} ({key[:12]}), which "
+                    "was since recomputed with different content (--force)"
+                )
+        return None
+
+    def varying_inputs(self, stage: str, key: str) -> dict[str, dict[str, str | None]]:
+        """The ``varying_inputs`` an output recorded: stage -> {key, digest} of the outputs
+        of ``varies`` stages it was computed from ({} for none or an unreadable output)."""
+        return dict((self._attributes(stage, key) or {}).get("varying_inputs") or {})
+
+    def content_digest(self, stage: str, key: str) -> str | None:
+        """SHA-256 of an output's manifest (every file's size and checksum): the same for the
+        same content; None when the output or its manifest is absent or unreadable."""
+        manifest = (self._attributes(stage, key) or {}).get("manifest")
+        if manifest is None:
+            return None
+        return hashlib.sha256(json.dumps(manifest, sort_keys=True).encode()).hexdigest()
+
+    def _attributes(self, stage: str, key: str) -> dict[str, Any] | None:
+        """The attributes of ``<stage>/<key>``'s group; None when absent or unreadable."""
+        try:
+            attrs = json.loads((self._path(stage, key) / "zarr.json").read_text())["attributes"]
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+        return attrs if isinstance(attrs, dict) else None
+
+    # -- quarantine and temporaries --------------------------------------------------------
+    def quarantine(self, stage: str, key: str, reason: str) -> Path:
+        """Move the group at ``<stage>/<key>`` to ``.quarantine/`` (reason in a .txt beside
+        it); returns its new path."""
+        stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%S")
+        dest = self.root / QUARANTINE / f"{stage}-{key[:16]}-{stamp}-{uuid.uuid4().hex[:6]}"
+        dest.parent.mkdir(exist_ok=True)
+        os.rename(self._path(stage, key), dest)
+        dest.with_suffix(".txt").write_text(f"{stage}/{key}\n{reason}\n")
+        return dest
+
+    def quarantined(self) -> list[Path]:
+        """Everything in the quarantine (damaged groups and their reason files)."""
+        q = self.root / QUARANTINE
+        return sorted(q.iterdir()) if q.is_dir() else []
+
+    def stale_temporaries(self) -> list[Path]:
+        """Temporary outputs whose writer is gone (dead or zombie local pid, or old foreign
+        host)."""
+        stale = []
+        tmp = self.root / TMP
+        for p in tmp.iterdir() if tmp.is_dir() else []:
+            owner = _owner(p.name)
+            if p.name.startswith("trash-") or owner is None:
+                stale.append(p)
+            elif owner[0] == self._host:
+                if not process_alive(owner[1], started_before=p.stat().st_mtime):
+                    stale.append(p)
+            elif time.time() - p.stat().st_mtime > STALE_FOREIGN_S:
+                stale.append(p)
+        return stale
+
+    def remove_stale_temporaries(self) -> list[Path]:
+        """Delete abandoned temporary outputs; returns what was removed.
+
+        An old output that a killed ``--force`` run had moved aside just before renaming its
+        new one into place is put back when its final path is still empty.
+        """
+        removed = []
+        for p in self.stale_temporaries():
+            parts = p.name.split("-")
+            if parts[0] == "replaced" and not self._path(parts[1], parts[2]).exists():
+                os.rename(p, self._path(parts[1], parts[2]))
+                continue
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+        return removed
