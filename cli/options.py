@@ -122,7 +122,7 @@ def with_target(command: Callable[..., Any]) -> Callable[..., Any]:
         target = Target(dag, loaded, list(config or []), overrides(dataset, set_))
         return command(target=target, **kwargs)
 
-    wrapper.__signature__ = signature.replace(parameters=[*shared, *own])  # type: ignore[attr-defined]
+    wrapper.__dict__["__signature__"] = signature.replace(parameters=[*shared, *own])
     wrapper.__annotations__ = {p.name: p.annotation for p in [*shared, *own]}
     del wrapper.__wrapped__  # typer reads the signature above, not the command's
     return wrapper
