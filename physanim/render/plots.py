@@ -10,6 +10,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import matplotlib
 import numpy as np
 from matplotlib.figure import Figure as MplFigure
 
@@ -24,7 +25,9 @@ def _save(fig: MplFigure, stem: str | Path) -> tuple[Path, Path]:
     fig.tight_layout()
     png, svg = stem.with_suffix(".png"), stem.with_suffix(".svg")
     fig.savefig(png, dpi=120)
-    fig.savefig(svg)
+    # no date and fixed element ids: the same figure gives the same bytes on every run
+    with matplotlib.rc_context({"svg.hashsalt": stem.name}):
+        fig.savefig(svg, metadata={"Date": None})
     return png, svg
 
 
