@@ -26,7 +26,14 @@ from physanim.store import StageStore, read_dataclass
 
 def evaluation_stage(pipeline: Pipeline) -> StageSpec[Any] | None:
     """The stage whose output is a FaceEvaluation (None: the pipeline has none)."""
-    return next((s for s in pipeline.stages if s.output is FaceEvaluation), None)
+    return next(
+        (
+            s
+            for s in pipeline.stages
+            if isinstance(s.output, type) and issubclass(s.output, FaceEvaluation)
+        ),
+        None,
+    )
 
 
 def variant_label(pipeline: Pipeline, store: StageStore, key: str) -> str:
