@@ -16,7 +16,8 @@ import cv2
 import numpy as np
 
 from physanim.capture.frames import Capture, CaptureError, check_gaps, depth_to_metres
-from physanim.capture.intrinsics import FORMS, parse_intrinsics, positive_number
+from physanim.capture.image_file import image_damage
+from physanim.capture.intrinsics import FORMS, frame_rate, parse_intrinsics, positive_number
 from physanim.capture.params import IngestParams
 from physanim.capture.stereo import StereoCalibration, StereoDepth
 
@@ -55,11 +56,41 @@ def _paired(a: dict[int, Path], b: dict[int, Path], what_b: str) -> np.ndarray:
     return np.array(sorted(a), dtype=np.int64)
 
 
+def _decode(path: Path) -> np.ndarray:
+    """The pixels of the image file ``path`` as stored (``cv2.IMREAD_UNCHANGED``), after its
+    integrity is checked (``physanim.capture.image_file``)."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise CaptureError(f"{path}: cannot read the image ({exc.strerror})") from None
+    damage = image_damage(path, data)
+    if damage is not None:
+        raise CaptureError(f"{path}: {damage}; re-copy or re-export this frame")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise CaptureError(f"{path}: unreadable image; re-copy or re-export this frame")
+    return img
+
+
+def color_channels(img: np.ndarray) -> int:
+    """Channels of a decoded colour file: 1 (greyscale), 3 (RGB) or 4 (RGBA)."""
+    return 1 if img.ndim == 2 else int(img.shape[2])
+
+
 def read_color(path: Path) -> np.ndarray:
     """8-bit RGB image (H, W, 3) uint8 from a colour (or greyscale) file."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise CaptureError(f"{path}: unreadable image")
+    return read_color_frame(path)[0]
+
+
+def read_color_frame(path: Path, channels: int | None = None) -> tuple[np.ndarray, int]:
+    """(8-bit RGB image (H, W, 3) uint8, channels of the file) of a colour (or greyscale)
+    file.
+
+    ``channels``: the other frames' format (1 greyscale, 3 RGB, 4 RGBA); a greyscale frame
+    among colour frames, or a colour frame among greyscale ones, is refused (a frame
+    re-exported or damaged: its colours would be silently wrong). RGB and RGBA mix (the
+    alpha channel is dropped)."""
+    img = _decode(path)
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[..., 0]
     if img.dtype != np.uint8 or not (img.ndim == 2 or img.shape[2] in (3, 4)):
@@ -67,16 +98,20 @@ def read_color(path: Path) -> np.ndarray:
             f"{path}: unsupported colour pixel format ({img.dtype}, shape {img.shape}); "
             "expected 8-bit RGB, RGBA or greyscale"
         )
+    if channels is not None and (color_channels(img) == 1) != (channels == 1):
+        this, others = ("greyscale", "colour") if img.ndim == 2 else ("colour", "greyscale")
+        raise CaptureError(
+            f"{path}: a {this} image among {others} frames; re-export this frame like the others"
+        )
     if img.ndim == 2:
-        return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB if img.shape[2] == 3 else cv2.COLOR_BGRA2RGB)
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB), 1
+    code = cv2.COLOR_BGR2RGB if img.shape[2] == 3 else cv2.COLOR_BGRA2RGB
+    return cv2.cvtColor(img, code), color_channels(img)
 
 
 def read_depth(path: Path) -> np.ndarray:
     """Raw 16-bit depth (H, W) uint16 from a depth PNG (0 = invalid)."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise CaptureError(f"{path}: unreadable image")
+    img = _decode(path)
     if img.dtype != np.uint16 or img.ndim != 2:
         raise CaptureError(
             f"{path}: unsupported depth pixel format ({img.dtype}, shape {img.shape}); "
@@ -106,20 +141,21 @@ def read_rgbd_folder(
         raise CaptureError(f"{intr_path}: not valid JSON ({exc}); {FORMS}") from None
     K, size = parse_intrinsics(intr, intr_path)
     scale = 1.0 / positive_number(intr, "depth_scale", params.rgbd_depth_scale, intr_path)
-    fps = positive_number(intr, "fps", params.fallback_fps, intr_path)
+    fps = frame_rate(intr, "fps", params.fallback_fps, intr_path)
     colors, depths = list_frames(root / "color"), list_frames(root / "depth")
     idx = _paired(colors, depths, "depth")
     missing = check_gaps(idx, str(root), params.max_missing_fraction)
     color = np.empty((len(idx), *size, 3), np.uint8)
     raw = np.empty((len(idx), *size), np.uint16)
+    channels = None
     for i, n in enumerate(idx.tolist()):
-        c, d = read_color(colors[n]), read_depth(depths[n])
+        (c, channels), d = read_color_frame(colors[n], channels), read_depth(depths[n])
         _same_size(c, d, colors[n], depths[n], "colour and depth must have the same size "
                    "(register depth to colour first)")  # fmt: skip
         if c.shape[:2] != size:
             raise CaptureError(
-                f"{colors[n]}: size {c.shape[1]}x{c.shape[0]} but {intr_path} says "
-                f"{size[1]}x{size[0]}; give the intrinsics of these images"
+                f"{colors[n]}: size {c.shape[1]}x{c.shape[0]} but {intr_path} gives width "
+                f"{size[1]}, height {size[0]}; give the intrinsics of these images"
             )
         color[i], raw[i] = c, d
         if progress is not None:
@@ -152,8 +188,10 @@ def read_stereo_folder(
     color = np.empty((len(idx), h, w, 3), np.uint8)
     depth = np.empty((len(idx), h, w), np.float32)
     limits = np.zeros((len(idx), 2))
+    channels = None
     for i, n in enumerate(idx.tolist()):
-        left, right = read_color(lefts[n]), read_color(rights[n])
+        left, channels = read_color_frame(lefts[n], channels)
+        right, channels = read_color_frame(rights[n], channels)
         _same_size(
             left, right, lefts[n], rights[n], "left and right images must have the same size"
         )

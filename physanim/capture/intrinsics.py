@@ -26,6 +26,10 @@ FORMS = (
 )
 #: Horizontal field of view (degrees) a face camera plausibly has.
 FOV_RANGE_DEG = (15.0, 150.0)
+#: Frame rates (frames/s) a recording's metadata may give.
+FPS_RANGE = (1.0, 1000.0)
+#: Largest image width or height (px) a recording's metadata may give.
+MAX_PIXELS = 100_000
 
 
 def is_camera_matrix(K: np.ndarray) -> bool:
@@ -84,18 +88,50 @@ def _from_keys(data: dict[str, Any], path: Path) -> np.ndarray:
 
 
 def positive_number(data: dict[str, Any], key: str, default: float | None, path: Path) -> float:
-    """``data[key]`` as a positive float (``default`` when absent; required if None)."""
+    """``data[key]`` as a positive, finite float (``default`` when absent; required if None)."""
     value = data.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not 0 < value < float("inf")
+    ):
         raise CaptureError(f"{path}: {key}: expected a positive number, got {value!r}")
     return float(value)
+
+
+def pixel_count(data: dict[str, Any], key: str, path: Path) -> int:
+    """``data[key]`` (required) as an image size in px: a whole number from 1 to
+    ``MAX_PIXELS``."""
+    value = data.get(key)
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not 1 <= value <= MAX_PIXELS
+        or value != int(value)
+    ):
+        raise CaptureError(
+            f"{path}: {key}: expected a whole number of pixels (1-{MAX_PIXELS}), got {value!r}"
+        )
+    return int(value)
+
+
+def frame_rate(data: dict[str, Any], key: str, default: float | None, path: Path) -> float:
+    """``data[key]`` as a frame rate within ``FPS_RANGE`` (``default``, unchecked, when
+    absent)."""
+    fps = positive_number(data, key, default, path)
+    if key in data and not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
+        raise CaptureError(
+            f"{path}: {key}: {fps:g} frames/s is not a camera's frame rate "
+            f"({FPS_RANGE[0]:g}-{FPS_RANGE[1]:g}); give the recording's frames per second"
+        )
+    return fps
 
 
 def parse_intrinsics(data: Any, path: Path) -> tuple[np.ndarray, tuple[int, int]]:
     """(K (3, 3) px, image size (H, W) px) from the parsed ``intrinsic.json`` of ``path``."""
     if not isinstance(data, dict):
         raise CaptureError(f"{path}: expected a JSON object; {FORMS}")
-    size = [int(positive_number(data, key, None, path)) for key in ("height", "width")]
+    size = [pixel_count(data, key, path) for key in ("height", "width")]
     K = _matrix(data["intrinsic_matrix"], path) if "intrinsic_matrix" in data else None
     return (K if K is not None else _from_keys(data, path)), (size[0], size[1])
 

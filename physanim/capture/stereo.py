@@ -22,7 +22,7 @@ import numpy as np
 import yaml
 
 from physanim.capture.frames import CaptureError
-from physanim.capture.intrinsics import is_camera_matrix, positive_number
+from physanim.capture.intrinsics import frame_rate, is_camera_matrix, pixel_count
 from physanim.capture.params import IngestParams
 
 CALIBRATION_KEYS = ("K1", "D1", "K2", "D2", "R", "T", "image_width", "image_height")
@@ -33,6 +33,12 @@ CALIBRATION_HELP = (
 #: Largest plausible stereo baseline (m): larger values are taken for millimetres.
 MAX_BASELINE_M = 2.0
 MAX_DISPARITIES = 1024
+
+
+def _cv_message(exc: cv2.error) -> str:
+    """The gist of an OpenCV error, on one line: its message without the source location."""
+    text = " ".join(line.lstrip("> ").strip() for line in str(exc).strip().splitlines())
+    return re.sub(r"^.*?error: (\([^)]*\))?\s*", "", text).strip()[:200] or type(exc).__name__
 
 
 class _CalibrationLoader(yaml.SafeLoader):
@@ -120,8 +126,8 @@ class StereoCalibration:
                 f"{path}: stereo calibration lacks {', '.join(absent)}; it needs {CALIBRATION_HELP}"
             )
         dist = ((0,), (4,), (5,), (8,), (12,), (14,))
-        size = [int(positive_number(data, k, None, path)) for k in ("image_height", "image_width")]
-        fps = positive_number(data, "fps", None, path) if "fps" in data else None
+        size = [pixel_count(data, k, path) for k in ("image_height", "image_width")]
+        fps = frame_rate(data, "fps", None, path) if "fps" in data else None
         T = _matrix(data["T"], "T", ((3,),), path)
         R = _matrix(data["R"], "R", ((3, 3), (3,)), path)
         if R.shape == (3,):  # a rotation vector
@@ -138,6 +144,11 @@ class StereoCalibration:
         )
         if not np.allclose(calib.R @ calib.R.T, np.eye(3), atol=1e-4):
             raise CaptureError(f"{path}: R: not a rotation matrix (R R^T != I)")
+        if np.linalg.det(calib.R) < 0:
+            raise CaptureError(
+                f"{path}: R: a reflection (determinant -1), not a rotation; give the rotation "
+                "from the left to the right camera"
+            )
         baseline = float(np.linalg.norm(T))
         if baseline > MAX_BASELINE_M:
             raise CaptureError(
@@ -238,8 +249,15 @@ class StereoDepth(StereoRig):
     ``where`` (the calibration file) names the input in errors."""
 
     def __init__(self, calib: StereoCalibration, params: IngestParams, where: Path) -> None:
-        super().__init__(calib)
+        try:
+            super().__init__(calib)
+        except cv2.error as exc:
+            raise CaptureError(
+                f"{where}: OpenCV cannot rectify this calibration ({_cv_message(exc)}); check "
+                "K1, D1, K2, D2, R, T"
+            ) from None
         self.params = params
+        self.where = where
         w = self.size[1]
         self.disparities = disparity_range(
             self.K[0, 0] * self.baseline, self.doffs, params.stereo_depth_range_m
@@ -340,9 +358,9 @@ class StereoDepth(StereoRig):
         ``at_limits`` of the disparities)."""
         if left.shape[:2] != self.size:
             raise CaptureError(
-                f"{where}: image is {left.shape[1]}x{left.shape[0]} but the calibration says "
-                f"{self.size[1]}x{self.size[0]}; give image_width, image_height and K1, K2 of "
-                "these images"
+                f"{where}: image is {left.shape[1]}x{left.shape[0]} but {self.where} gives "
+                f"image_width {self.size[1]}, image_height {self.size[0]}; give image_width, "
+                "image_height and K1, K2 of these images"
             )
         left, right = self.rectified(left, right)
         disp = self.disparity(left, right)

@@ -29,11 +29,23 @@ VALID_JUMP, MEDIAN_JUMP = 0.2, 0.25
 
 DEPTH_FIX = {
     "rgbd": "depth_scale wrong? set depth_scale (raw units per metre, e.g. 1000 for mm, 4000 "
-    "for 0.25 mm) in intrinsic.json, or ingest.rgbd_depth_scale",
+    "for 0.25 mm) in {file}, or ingest.rgbd_depth_scale",
     "bag": "the bag's depth unit is wrong or the subject is out of range; re-record with the "
     "face 0.2-2 m from the camera",
-    "stereo": "calibration wrong? T in metres, K1/K2 in px of these images",
+    "stereo": "calibration wrong? in {file}: T in metres, K1/K2 in px of these images",
 }
+
+
+#: The file holding the intrinsics of each kind of folder recording
+INTRINSICS_FILE = {"rgbd": "intrinsic.json", "stereo": "calibration.yaml"}
+
+
+def intrinsics_file(capture: Capture) -> str:
+    """The file whose intrinsics ``capture.K`` are (for messages): an RGBD folder's
+    intrinsic.json, a stereo folder's calibration.yaml, else the recording (a bag)."""
+    where = capture.origin or capture.source
+    name = INTRINSICS_FILE.get(capture.kind)
+    return f"{where}/{name}" if name and capture.origin else where
 
 
 def central(depth: np.ndarray) -> np.ndarray:
@@ -112,8 +124,8 @@ def check_capture(capture: Capture, params: IngestParams) -> tuple[list[Problem]
     the implausible depth frames (an error unless ``params.implausible_depth`` allows them)."""
     where = capture.origin or capture.source
     h, w = capture.depth.shape[1:]
-    out = check_camera_matrix(capture.K, (h, w), where)
-    fix = DEPTH_FIX.get(capture.kind, DEPTH_FIX["rgbd"])
+    out = check_camera_matrix(capture.K, (h, w), intrinsics_file(capture))
+    fix = DEPTH_FIX.get(capture.kind, DEPTH_FIX["rgbd"]).format(file=intrinsics_file(capture))
     if not np.isfinite(capture.depth).any():
         out.append(Problem("error", (
             f"{where}: no valid depth in any of the {capture.n_frames} frames (all zero or "

@@ -122,7 +122,7 @@ def test_depth_range_too_narrow_warns(pair, tmp_path: Path) -> None:
         ({"K1": [[FX, 0.0, CX], [0.0, FX, CY]]}, r"K1: expected 3x3 values, got shape \(2, 3\)"),
         ({"K2": [[FX, 0, 0], [0, FX, 0], [CX, CY, 1]]}, r"K2: not a camera matrix.*row by row"),
         ({"R": None}, r"stereo calibration lacks R; it needs K1, K2"),
-        ({"image_width": "wide"}, r"image_width: expected a positive number, got 'wide'"),
+        ({"image_width": "wide"}, r"image_width: expected a whole number of pixels.*got 'wide'"),
     ],
 )
 def test_bad_calibration_fields_are_named(pair, tmp_path: Path, edit: dict, message: str) -> None:
