@@ -44,6 +44,16 @@ def _yaml(text: str):
     return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
 
 
+def _yaml_error(exc: yaml.YAMLError) -> str:
+    """A YAML error on one line: the problem and where (line, column), else its text."""
+    problem = getattr(exc, "problem", None)
+    mark = getattr(exc, "problem_mark", None)
+    if problem is None:
+        return " ".join(str(exc).split())
+    at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    return f"{problem}{at}"
+
+
 class ConfigError(ValueError):
     """A config file or override is missing, malformed or invalid; the message says where."""
 
@@ -56,7 +66,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     try:
         data = _yaml(path.read_text())
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+        raise ConfigError(f"{path}: not valid YAML: {_yaml_error(exc)}") from exc
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -107,7 +117,7 @@ def parse_override(text: str) -> dict[str, Any]:
     try:
         value = _yaml(raw) if raw.strip() else ""
     except yaml.YAMLError as exc:
-        raise ConfigError(f"--set {text!r}: value is not valid YAML: {exc}") from exc
+        raise ConfigError(f"--set {text!r}: value is not valid YAML: {_yaml_error(exc)}") from exc
     tree: dict[str, Any] = {parts[-1]: value}
     for p in reversed(parts[:-1]):
         tree = {p: tree}
