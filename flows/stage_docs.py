@@ -124,10 +124,8 @@ def params_rows(model: type[BaseModel], value: Any = None, prefix: str = "") -> 
     for name, field in model.model_fields.items():
         if isinstance(value, BaseModel):
             default = getattr(value, name)
-        elif field.default_factory is not None:
-            default = field.default_factory()  # type: ignore[call-arg]
         else:
-            default = field.default
+            default = field.get_default(call_default_factory=True)
         nested = _model_in(field.annotation)
         shown = "fields below" if nested and isinstance(default, BaseModel) else _default(default)
         desc = field.description or (_doc(nested[1]).split("\n\n")[0] if nested else "")
@@ -156,8 +154,9 @@ def output_rows(cls: type, prefix: str = "", depth: int = 0) -> Iterator[tuple[s
         yield prefix + f.name, type_name(f.type)
         inner = hints.get(f.name)
         options = [a for a in typing.get_args(inner) if a is not type(None)] or [inner]
-        if depth < 2 and len(options) == 1 and dataclasses.is_dataclass(options[0]):
-            yield from output_rows(options[0], f"{prefix}{f.name}.", depth + 1)  # type: ignore[arg-type]
+        nested = options[0] if len(options) == 1 else None
+        if depth < 2 and isinstance(nested, type) and dataclasses.is_dataclass(nested):
+            yield from output_rows(nested, f"{prefix}{f.name}.", depth + 1)
 
 
 def _relative(path: Path) -> str:

@@ -1,11 +1,12 @@
 """Constitutive laws of the tet FEM: per-tet Voigt matrices from :class:`TetMaterials`.
 
 A law is a pydantic model, so it is its own config schema: its fields are the law's settings
-(``simulate.law`` in a config: ``{name: kelvin_voigt, viscosity: isotropic}``), its
+(``simulate.law`` in a config: ``{name: kelvin_voigt, viscosity_form: isotropic}``), its
 ``tet_fields`` the per-tet material fields it reads (the four base fields E, nu, eta, rho, or
-any further field a materials file gives per region, named with its SI unit, e.g. ``beta_s``).
-It has two methods: ``moduli`` (the isotropic linear elastic part, shear and bulk modulus per
-tet) and ``viscosity`` (the viscous Voigt matrix C' per tet, stress = C' strain rate). The
+any further field a materials file gives per region under ``fields``, named with its SI unit,
+e.g. ``beta_s``). It has two methods: ``moduli`` (the isotropic linear elastic part, shear and
+bulk modulus per tet) and ``viscosity`` (the viscous Voigt matrix C' per tet, stress = C'
+strain rate). The
 element formulation (:mod:`physanim.fem.elements`) decides how the volumetric part is
 assembled.
 

@@ -25,17 +25,17 @@ def extra_table(model: MaterialModel) -> dict[str, np.ndarray]:
     """The law-declared fields beyond E, nu, eta, rho: name -> (1 + len(REGION_NAMES),) SI
     values per region label (row 0 default). A region that omits a field takes the default's
     value; a field no default gives is an error naming the region."""
-    default = model.default.extra_fields
+    default = model.default.fields
     for region, values in model.regions.items():
-        unknown = sorted(set(values.extra_fields) - set(default))
+        unknown = sorted(set(values.fields) - set(default))
         if unknown:
             raise ValueError(
-                f"materials file '{model.name}': region {region} gives {unknown}, which the "
-                "default section lacks; give them under 'default' too"
+                f"materials file '{model.name}': region {region} gives fields {unknown}, which "
+                "the default section lacks; give them under default.fields too"
             )
     regions = [model.regions.get(n, model.default) for n in REGION_NAMES]
     return {
-        field: np.array([value, *(r.extra_fields.get(field, value) for r in regions)])
+        field: np.array([value, *(r.fields.get(field, value) for r in regions)])
         for field, value in default.items()
     }
 

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, model_validator
 
 #: Facial material regions of seed 004 (Tables 6.4-6.5); every other skin point is "default".
 REGION_NAMES: tuple[str, ...] = ("Cheek", "cphs_L", "cphs_R", "Cheilion", "cphi", "Alare")
@@ -252,29 +251,19 @@ class MaterialsParams(BaseModel):
 
 class TissueMaterial(BaseModel):
     """Linear viscoelastic (Kelvin-Voigt) tissue constants of one region, plus any further
-    per-tet field a material law declares (``simulate.law``), named with its SI unit
-    (``beta_s: 0.001``) and given as a number."""
+    per-tet field a material law declares (``simulate.law``) under ``fields``."""
 
-    model_config = ConfigDict(extra="allow")
+    model_config = ConfigDict(extra="forbid")
 
     E_kPa: float = Field(gt=0.0, le=1e5, description="Young's modulus, kPa.")
     nu: float = Field(ge=0.0, lt=0.5, description="Poisson's ratio (dimensionless).")
     eta_Pa_s: float = Field(ge=0.0, le=1e6, description="Viscosity, Pa*s.")
     rho_kg_m3: float = Field(gt=0.0, le=1e4, description="Density, kg/m^3.")
-
-    @model_validator(mode="after")
-    def _extra_fields_are_numbers(self) -> TissueMaterial:
-        for name, value in (self.model_extra or {}).items():
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ValueError(f"field {name!r} must be a number (SI units), got {value!r}")
-            if not math.isfinite(value):
-                raise ValueError(f"field {name!r} must be finite, got {value!r}")
-        return self
-
-    @property
-    def extra_fields(self) -> dict[str, float]:
-        """The law-declared fields beyond E, nu, eta, rho: name -> value (SI)."""
-        return {k: float(v) for k, v in (self.model_extra or {}).items()}
+    fields: dict[str, FiniteFloat] = Field(
+        default_factory=dict,
+        description="Per-tet fields a material law declares beyond E, nu, eta and rho: name "
+        "with its SI unit (e.g. beta_s) -> value in that unit.",
+    )
 
 
 class MaterialModel(BaseModel):

@@ -1,6 +1,6 @@
 """A new constitutive law plugs in without editing the library: one class with its schema,
 defined and registered here, chosen by name from a YAML config (its per-tet field ``beta_s``
-given per region in the materials file) and run through ``simulate``, against analytic
+given in the materials file's ``fields``) and run through ``simulate``, against analytic
 answers."""
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ simulate: {law: {name: stiffness_proportional}, formulation: p1, stepping: fixed
 materials:
   model:
     name: rayleigh
-    default: {E_kPa: 20.0, nu: 0.3, eta_Pa_s: 0.0, rho_kg_m3: 1000.0, beta_s: 0.0}
+    default: {E_kPa: 20.0, nu: 0.3, eta_Pa_s: 0.0, rho_kg_m3: 1000.0, fields: {beta_s: 0.0}}
 """
 
 
@@ -141,6 +141,15 @@ def test_a_law_refuses_materials_without_its_fields_and_a_config_an_unknown_law(
     nodes, tets = box_mesh((1, 1, 1), (0.01, 0.01, 0.01))
     with pytest.raises(ValueError, match=r"lack the per-tet field\(s\) \['beta_s'\]"):
         build_model(nodes, tets, TetMaterials.uniform(len(tets)), law=StiffnessProportional())
+    _, model_file = _from_config(tmp_path, 1e-3)
+    cheek = model_file.default.model_copy(update={"fields": {"beta_s": 2e-3, "gamma_s": 1.0}})
+    regional = model_file.model_copy(update={"regions": {"Cheek": cheek}})
+    np.testing.assert_array_equal(tet_materials(np.array([0, 1]), model_file)["beta_s"], 1e-3)
+    stiffer = model_file.model_copy(update={"regions": {"Cheek": cheek.model_copy(
+        update={"fields": {"beta_s": 2e-3}})}})  # fmt: skip
+    np.testing.assert_array_equal(tet_materials(np.array([0, 1]), stiffer)["beta_s"], [1e-3, 2e-3])
+    with pytest.raises(ValueError, match=r"region Cheek gives fields \['gamma_s'\]"):
+        tet_materials(np.array([0, 1]), regional)
     for law, said in (("{name: nope}", "registered laws: .*stiffness_proportional"),
                       ("{name: stiffness_proportional, scale: -1}", "scale")):  # fmt: skip
         (tmp_path / "bad.yaml").write_text(

@@ -48,9 +48,12 @@ def test_kill9_at_random_points_of_a_toy_dag(toy_config: Path, tmp_path: Path) -
 
 def test_kill9_in_a_forced_face_stage_keeps_the_old_output(face_copy: Path) -> None:
     """``--force simulate`` killed while simulate computes: the old output is still there,
-    intact and unchanged; the next run removes the partial copy and has nothing to do."""
+    intact and unchanged; the next run removes the partial copy and has nothing to do. Fixed
+    0.1 ms steps make simulate take seconds on the coarse mesh (adaptive steps took 0.8 s, as
+    long as the wait before the kill)."""
     store = StageStore(ROOT / face_copy / "runs" / "store.zarr")
-    args = ["--dataset", str(face_copy), "-c", COARSE]
+    slow = ["--set", "simulate.stepping=fixed", "--set", "simulate.dt=0.0001"]
+    args = ["--dataset", str(face_copy), "-c", COARSE, *slow]
     assert invoke("run", *args, "--local").returncode == 0  # the latest run: this config's
     key = store.latest("simulate")
     before = store.provenance("simulate", key)["manifest"]
