@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 from flows.dags import FACE, get_pipeline
 from physanim.config import ConfigError, load_config
-from physanim.config.loader import _model_of
+from physanim.config.loader import _model_of, _yaml
 from physanim.pipeline.sweep import plan_sweep
 
 MODEL = FACE.config_model()
@@ -194,7 +194,7 @@ def _names(message: str, source: str, key: str) -> bool:
     return any(
         s in line and any(f"{stem}:" in line or f"{stem}." in line for stem in stems)
         for s in sources
-        for line in message.splitlines()
+        for line in message.split("\n")  # not splitlines: the text may hold U+0085
     )
 
 
@@ -238,16 +238,30 @@ def test_config_files(case: tuple[str, Any, bool | None]) -> None:
     STATS[("-c file value", outcome)] += 1
 
 
+CHARS = st.characters(codec="utf-8", exclude_categories=["Cs"])
+
+
 @settings(FUZZ, max_examples=EXAMPLES or 200)
-@given(text=st.text(st.characters(codec="utf-8", exclude_categories=["Cs"]), max_size=40))
+@given(
+    text=st.one_of(
+        st.text(CHARS, max_size=40),  # anything
+        st.builds(  # a known key and any text as its value, as a user may type it
+            "{}={}".format, st.sampled_from(sorted(LEAVES)), st.text(CHARS, max_size=20)
+        ),
+    )
+)
 def test_raw_set_text(text: str) -> None:
-    """Any text after ``--set``: refused naming it, or accepted (never another exception)."""
+    """Any text after ``--set``: refused naming it, or accepted with the value its YAML
+    gives (never another exception)."""
     try:
-        load_config(MODEL, [DEFAULT], [text])
+        cfg = load_config(MODEL, [DEFAULT], [text])[0]
     except ConfigError as exc:
         assert f"--set {text}" in str(exc) or f"--set {text!r}" in str(exc), str(exc)
         STATS[("raw --set text", "refused")] += 1
         return
+    key, raw = text.split("=", 1)
+    value = _yaml(raw) if raw.strip() else ""
+    assert same(value, get(cfg, key.strip())), f"{text}: the config has {get(cfg, key)!r}"
     STATS[("raw --set text", "accepted")] += 1
 
 
@@ -294,7 +308,7 @@ def test_sweep_files(spec: dict[str, Any]) -> None:
         except (ConfigError, ValueError) as exc:  # what `physanim sweep` reports in one line
             # the sweep file named on the first line (a variant's problems follow, one a line)
             # or on each problem's line
-            lines = [x for x in str(exc).splitlines() if x.strip() != "invalid config:"]
+            lines = [x for x in str(exc).split("\n") if x.strip() != "invalid config:"]
             named = str(path) in lines[0] or all(str(path) in x for x in lines)
             assert named or "nosuchdag" in str(exc), str(exc)
             STATS[("sweep file", "refused")] += 1
