@@ -6,11 +6,14 @@ The layout and the guarantees these checks uphold are described in ``stage_store
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import datetime as dt
 import hashlib
 import json
 import os
 import shutil
+import threading
 import time
 import uuid
 from collections.abc import Mapping
@@ -21,6 +24,9 @@ from physanim.processes import process_alive
 
 TMP = ".tmp"
 QUARANTINE = ".quarantine"
+#: Attribute of an output's own ``zarr.json``: SHA-256 of the rest of that document (its
+#: attributes, the manifest among them, are in no manifest; a flipped bit there is found)
+SEAL = "metadata_sha256"
 #: Age after which a temporary output of another host is considered abandoned, seconds.
 STALE_FOREIGN_S = 24 * 3600
 
@@ -47,6 +53,53 @@ def ensure_group(path: Path) -> None:
         return
     path.mkdir(parents=True, exist_ok=True)
     write_atomic(meta, json.dumps({"zarr_format": 3, "node_type": "group", "attributes": {}}))
+
+
+def _zarr_writes_settled(timeout: float = 60.0) -> None:
+    """Wait until the writes in flight on Zarr's I/O loop have ended (at most ``timeout`` s).
+
+    When one chunk write of an array fails (ENOSPC, EIO), Zarr raises at once while the other
+    chunk writes of the same assignment go on in its I/O thread; removed before they end, a
+    temporary output is recreated by them (their ``mkdir(parents=True)``) and left behind.
+    """
+    from zarr.core import sync as zarr_sync
+
+    loop, io_thread = zarr_sync.loop[0], zarr_sync.iothread[0]
+    if loop is None or loop.is_closed() or threading.current_thread() is io_thread:
+        return
+
+    async def the_others_done() -> None:
+        me = asyncio.current_task()
+        pending = [t for t in asyncio.all_tasks() if t is not me]
+        if pending:
+            await asyncio.wait(pending, timeout=timeout)
+
+    with contextlib.suppress(Exception):  # a stopped loop has nothing in flight
+        asyncio.run_coroutine_threadsafe(the_others_done(), loop).result(timeout + 5)
+
+
+def discard(path: Path) -> None:
+    """Remove a temporary output that failed to be written, once nothing writes to it."""
+    _zarr_writes_settled()
+    for attempt in range(10):
+        shutil.rmtree(path, ignore_errors=True)
+        if not path.exists():
+            return
+        time.sleep(0.01 * 2**attempt)  # a straggling write recreated part of it
+
+
+def metadata_digest(document: Mapping[str, Any]) -> str:
+    """SHA-256 of a group's ``zarr.json`` document without its own ``SEAL`` attribute."""
+    attrs = {k: v for k, v in (document.get("attributes") or {}).items() if k != SEAL}
+    rest = {**document, "attributes": attrs}
+    return hashlib.sha256(json.dumps(rest, sort_keys=True).encode()).hexdigest()
+
+
+def seal_metadata(meta: Path) -> None:
+    """Add ``SEAL`` to the attributes of the group metadata ``meta`` (rewritten atomically)."""
+    document = json.loads(meta.read_text())
+    document.setdefault("attributes", {})[SEAL] = metadata_digest(document)
+    write_atomic(meta, json.dumps(document, indent=2))
 
 
 def _sha256(path: Path) -> str:
@@ -101,9 +154,10 @@ class StoreIntegrity:
     def damage(self, stage: str, key: str, *, checksums: bool = False) -> str | None:
         """What is wrong with the group at ``<stage>/<key>``; None when it is absent or intact.
 
-        Checks that the metadata reads, that the output was committed complete and that every
-        file of its manifest is present with its size (and, with ``checksums``, its SHA-256),
-        then that no output it was computed from has been replaced by different content since.
+        Checks that the metadata reads and matches its own checksum (``SEAL``), that the output
+        was committed complete and that every file of its manifest is present with its size
+        (and, with ``checksums``, its SHA-256), then that no output it was computed from has
+        been replaced by different content since.
         Outputs written before manifests existed are taken as they are.
         """
         path = self._path(stage, key)
@@ -111,13 +165,20 @@ class StoreIntegrity:
             return None
         meta = path / "zarr.json"
         try:
-            attrs = json.loads(meta.read_text()).get("attributes", {})
+            document = json.loads(meta.read_text())
+            attrs = document.get("attributes", {})
+            if not attrs.get("complete"):
+                return (
+                    "incomplete (complete=false): left by an interrupted or failed writer "
+                    f"(metadata {meta})"
+                )
+            sealed = attrs.get(SEAL)
+            if sealed is not None and sealed != metadata_digest(document):
+                return f"metadata {meta} does not match its checksum"
         except FileNotFoundError:
             return f"metadata {meta} is missing"
-        except (ValueError, OSError, AttributeError) as exc:
+        except (ValueError, OSError, AttributeError, TypeError) as exc:
             return f"metadata {meta} is unreadable ({exc})"
-        if not attrs.get("complete"):
-            return "incomplete (complete=false): left by an interrupted or failed writer"
         manifest = attrs.get("manifest")
         if manifest is None:
             return None
@@ -222,5 +283,6 @@ class StoreIntegrity:
                 os.rename(p, self._path(parts[1], parts[2]))
                 continue
             shutil.rmtree(p, ignore_errors=True)
-            removed.append(p)
+            if not p.exists():  # (a read-only store keeps it)
+                removed.append(p)
         return removed

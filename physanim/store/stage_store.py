@@ -18,7 +18,8 @@ An output is written in ``.tmp/`` and moved into ``<stage>/<key>`` by one ``os.r
 after its ``complete`` attribute is set, so a process killed at any moment never leaves a group
 that reads as complete; Zarr v3 would otherwise read missing chunks of a half-written array as
 fill values without error.  The same last metadata write records the output's manifest: the
-size and SHA-256 of every file of the group (array metadata, chunks, plain files).  Every read
+size and SHA-256 of every file of the group (array metadata, chunks, plain files), and the
+SHA-256 of that metadata document itself (``metadata_sha256``).  Every read
 through the store checks that those files are present with their sizes (cheap), ``verify``
 also checks their checksums, so a deleted or truncated chunk is an error naming stage, key,
 array and chunk instead of zeros.  A damaged or incomplete group found at a final path is moved
@@ -54,7 +55,9 @@ from physanim.store.integrity import (
     TMP,
     StoreIntegrity,
     build_manifest,
+    discard,
     ensure_group,
+    seal_metadata,
 )
 from physanim.store.runs import LATEST, RUNS, StoreRuns
 
@@ -190,7 +193,7 @@ class StageStore(StoreRuns, StoreIntegrity):
             )
             yield group
             t1 = time.time()
-            group.attrs.update(  # the last metadata write before the rename
+            group.attrs.update(  # written complete, then sealed: the last before the rename
                 {
                     "finished": dt.datetime.fromtimestamp(t1, dt.UTC).isoformat(),
                     "duration_s": round(t1 - t0, 6),
@@ -198,14 +201,15 @@ class StageStore(StoreRuns, StoreIntegrity):
                     "complete": True,
                 }
             )
+            seal_metadata(tmp / "zarr.json")
             self._commit(tmp, stage, key, replace)
         except OSError as exc:
-            shutil.rmtree(tmp, ignore_errors=True)
+            discard(tmp)
             if exc.filename is None and exc.errno is not None:  # name what failed to be written
                 raise OSError(exc.errno, exc.strerror, str(tmp)) from exc
             raise
         except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
+            discard(tmp)
             raise
 
     def _commit(self, tmp: Path, stage: str, key: str, replace: bool) -> None:
@@ -223,6 +227,10 @@ class StageStore(StoreRuns, StoreIntegrity):
         try:
             os.rename(tmp, final)
         except OSError:
+            if aside is not None and not final.exists():  # (EIO...): the old output back
+                with contextlib.suppress(OSError):  # else the next run puts it back
+                    os.rename(aside, final)
+                raise
             if not self.has(stage, key):
                 raise
             shutil.rmtree(tmp, ignore_errors=True)  # another writer won the race
