@@ -255,7 +255,7 @@ def status(
     data = target.config.dataset.path
     if not data.exists():
         console.print(f"note: dataset directory {data} does not exist", highlight=False)
-    _, entries = _plan(target, only, start, force, create=False, checksums=verify)
+    store, entries = _plan(target, only, start, force, create=False, checksums=verify)
     if as_json:
         rows = [
             {"stage": e.stage, "key": e.key, "action": e.action, "why": e.reason,
@@ -265,13 +265,25 @@ def status(
         print(json.dumps(rows, indent=2))
     else:
         Console().print(_plan_table(entries))
+        for e in entries:  # in full: the table's column may cut a long path short
+            where = store.root / e.stage / e.key
+            if e.damage:  # the damaged file's path, or the output's with the file in it
+                at = "" if str(where) in e.damage else f" ({where})"
+                print(f"damaged: {e.stage}/{e.key[:12]}{at}: {e.damage}")
 
 
 @app.command()
 @with_target
 def verify(target: Target) -> None:
-    """Check every output of the store against its manifest (files, sizes, checksums)."""
+    """Check every output of the store against its manifest (files, sizes, checksums);
+    remove the partial outputs that killed or failed runs left in its .tmp/."""
     store = target.store(create=False)
+    try:  # what killed or failed writers left in .tmp/ (a read-only store keeps it)
+        removed = store.remove_stale_temporaries()
+    except OSError:
+        removed = []
+    for leftover in removed:
+        print(f"removed abandoned partial output {leftover.name}")
     checked = damaged = 0
     for stage in store.stages():
         for key in store.all_keys(stage):
@@ -279,7 +291,9 @@ def verify(target: Target) -> None:
             problem = store.damage(stage, key, checksums=True)
             if problem is not None:
                 damaged += 1
-                print(f"damaged: {stage}/{key[:12]}: {problem}")
+                where = store.root / stage / key
+                at = "" if str(where) in problem else f" ({where})"
+                print(f"damaged: {stage}/{key[:12]}{at}: {problem}")
     line = f"{checked} output(s) checked in {store.root}, {damaged} damaged"
     quarantined = [p for p in store.quarantined() if p.is_dir()]
     if quarantined:
