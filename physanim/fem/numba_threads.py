@@ -21,6 +21,15 @@ P = ParamSpec("P")
 R = TypeVar("R")
 
 
+def work_partitions(n_threads: int | None = None) -> int:
+    """How many pieces a parallel kernel splits its work into: ``n_threads`` when given, else
+    numba's thread pool size (NUMBA_NUM_THREADS), not the current thread count. A run that
+    lowers the thread count after timing it (:func:`faster_thread_count`, ``ThreadTrials``)
+    then runs the same pieces on fewer threads, so its sums, and its results, are the same
+    bytes whichever count it picked."""
+    return max(1, int(n_threads or numba.config.NUMBA_NUM_THREADS))
+
+
 def keeps_thread_count(fn: Callable[P, R]) -> Callable[P, R]:
     """Decorator: numba's thread count is restored when ``fn`` returns or raises (``fn`` may
     lower it with :func:`faster_thread_count`)."""

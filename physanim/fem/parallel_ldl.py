@@ -20,12 +20,11 @@ from __future__ import annotations
 import copy
 import heapq
 
-import numba
 import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-import physanim.fem.numba_threads  # noqa: F401  (threading layer, before compiling)
+from physanim.fem.numba_threads import work_partitions  # sets the threading layer first
 
 U0, U1 = np.uint64(0), np.uint64(1)
 
@@ -356,7 +355,8 @@ class ParallelLDL:
     """Solve A x = b for a fixed factor A = P^T L D L^T P on ``n_threads`` threads.
 
     L: (n, n) sparse unit lower triangular (diagonal stored or not); d: (n,) diagonal of D;
-    perm: (n,) with (P b)[i] = b[perm[i]]. n_threads defaults to numba's thread count.
+    perm: (n,) with (P b)[i] = b[perm[i]]. n_threads: work pieces (default: numba's thread
+    pool size, :func:`~physanim.fem.numba_threads.work_partitions`).
     strict: L is already CSC with sorted indices and only its strictly lower entries.
     dtype: float64, or float32 to store L's entries in single precision (half the bytes the
     memory-bound sweeps read; the sweeps still accumulate in float64).
@@ -415,7 +415,7 @@ class ParallelLDL:
         indptr = indptr.astype(np.int64, copy=False)
         # indices stay as given (CHOLMOD's int32): an int64 copy is 8 bytes per entry
         cnt = np.diff(indptr) - skip
-        n_bins = max(1, int(n_threads or numba.get_num_threads()))
+        n_bins = work_partitions(n_threads)
         is_top, bin_roots = _partition(parent, cnt + 1, n_bins)
 
         # fundamental supernodes: j joins j+1 when j+1 is its parent and only child and the

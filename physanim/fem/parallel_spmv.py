@@ -10,12 +10,11 @@ cores).
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-import physanim.fem.numba_threads  # noqa: F401  (threading layer, before compiling)
+from physanim.fem.numba_threads import work_partitions  # sets the threading layer first
 
 # unsigned offsets and indices (uint64 / uint32): numba adds a negative-index wraparound
 # select to every load through a signed index
@@ -74,14 +73,15 @@ def _csr_arrays(A: sp.spmatrix, n_threads: int | None) -> tuple[np.ndarray, ...]
     A = sp.csr_matrix(A, copy=True)
     A.sum_duplicates()
     A.eliminate_zeros()
-    k = max(1, int(n_threads or numba.get_num_threads()))
+    k = work_partitions(n_threads)
     cuts = np.searchsorted(A.indptr, A.nnz * np.arange(1, k) / k)
     bounds = np.r_[0, cuts, A.shape[0]].astype(np.int64)
     return A.indptr.astype(np.uint64), A.indices.astype(np.uint32), A.data, bounds
 
 
 class ParallelCSR:
-    """y = A x for a fixed sparse A (n, m) on ``n_threads`` threads (numba's by default)."""
+    """y = A x for a fixed sparse A (n, m) in ``n_threads`` row pieces (default: numba's thread
+    pool size, :func:`~physanim.fem.numba_threads.work_partitions`), run on numba's threads."""
 
     def __init__(self, A: sp.spmatrix, n_threads: int | None = None) -> None:
         self.shape = A.shape

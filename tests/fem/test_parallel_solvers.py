@@ -209,3 +209,39 @@ def test_thread_trials_switch_only_when_the_other_count_was_faster():
     used = run({2: 1.0, 1: 0.8}, {30: 2.0})
     assert used[30:59] == [1] * 29
     assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
+
+
+def _two_branches(n: int) -> np.ndarray:
+    """An SPD matrix whose elimination tree has two chains of ``n`` joined at a last node
+    (the partition puts them in different pieces; the last row sums both)."""
+    T = 4.0 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)
+    A = np.zeros((2 * n + 1, 2 * n + 1))
+    A[:n, :n] = A[n : 2 * n, n : 2 * n] = T
+    A[-1, -1] = 4.0
+    A[-1, [n - 1, 2 * n - 1]] = A[[n - 1, 2 * n - 1], -1] = -1.0
+    return A
+
+
+@pytest.mark.skipif(
+    numba.config.NUMBA_NUM_THREADS < 2, reason="one numba thread: nothing to compare"
+)
+@keeps_thread_count
+def test_results_do_not_depend_on_the_thread_count_in_use():
+    """The solve, the products and the quadratic form split their work by numba's pool
+    size, not by the thread count set when they were built or run: ``simulate`` lowers it to
+    1 when that is faster (cores busy), and its results are the same bytes either way (they
+    differed in the last bits when the pieces followed the thread count)."""
+    L, d = _dense_ldl(_two_branches(60))
+    rng = np.random.default_rng(3)
+    b = rng.normal(size=(len(d), 2))
+    K = sp.csr_matrix(_tet_model()[0].K)
+    x = rng.normal(size=K.shape[0])
+    most = numba.config.NUMBA_NUM_THREADS
+    out = []
+    for built, run in ((most, most), (1, most), (1, 1), (most, 1)):
+        numba.set_num_threads(built)
+        solve = ParallelLDL(sp.csc_matrix(np.tril(L, -1)), d, np.arange(len(d)))
+        product, energy = ParallelCSR(K), SymmetricQuadraticForm(K)
+        numba.set_num_threads(run)
+        out.append((solve(b).tobytes(), (product @ x).tobytes(), energy(x)))
+    assert all(o == out[0] for o in out)
