@@ -51,6 +51,9 @@ class Faults:
             raise ValueError(f"unknown fault kind {kind!r}; one of {', '.join(KINDS)}")
         self.kind, self.n, self.root = kind, n, os.path.realpath(root)
         self.writes = self.renames = 0
+        #: writes and renames by the stage whose temporary output they touch ("" for the rest:
+        #: group metadata, run manifests, LATEST)
+        self.by_stage: dict[str, list[int]] = {}
         self.fired: str | None = None  # what failed first, for the campaign's log
         self._lock = threading.Lock()
 
@@ -63,10 +66,16 @@ class Faults:
             return False
         return full == self.root or full.startswith(self.root + os.sep)
 
+    def _tally(self, path: str, which: int) -> None:
+        parts = os.path.relpath(os.path.realpath(path), self.root).split(os.sep)
+        stage = parts[1].split("-")[0] if parts[0] == ".tmp" and len(parts) > 1 else ""
+        self.by_stage.setdefault(stage, [0, 0])[which] += 1
+
     def write_fails(self, path: str) -> int | None:
         """errno the next write to ``path`` fails with, KILL, or None."""
         with self._lock:
             self.writes += 1
+            self._tally(path, 0)
             if self.kind == "kill" and self.writes + self.renames == self.n:
                 return KILL
             if self.kind == "enospc" and (self.fired or self.writes == self.n):
@@ -83,6 +92,7 @@ class Faults:
     def rename_fails(self, src: str) -> bool:
         with self._lock:
             self.renames += 1
+            self._tally(src, 1)
             if self.kind == "kill" and self.writes + self.renames == self.n:
                 self.fired = "kill"
                 return True
@@ -92,7 +102,12 @@ class Faults:
         return False
 
     def report(self) -> dict[str, Any]:
-        return {"writes": self.writes, "renames": self.renames, "fired": self.fired}
+        return {
+            "writes": self.writes,
+            "renames": self.renames,
+            "by_stage": self.by_stage,
+            "fired": self.fired,
+        }
 
 
 class _FaultyFile:
