@@ -57,7 +57,11 @@ def symmetry_normal(vertices: np.ndarray, left_hint: np.ndarray, max_dist_m: flo
     reflection = reg.transformation[:3, :3] @ mirror
     w, vecs = np.linalg.eig(reflection)
     normal = np.real(vecs[:, np.argmin(np.real(w))])
-    return _unit(normal if normal @ h > 0 else -normal)
+    # Open3D's ICP sums over threads in no fixed order: the plane differs in the last bits
+    # from process to process, and the remeshed scan (scan stage) with it. Rounded to 1e-12
+    # (far below any geometric meaning), the actor frame is the same bytes every run.
+    normal = np.round(_unit(normal if normal @ h > 0 else -normal), 12)
+    return _unit(normal)
 
 
 def to_actor_frame(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
