@@ -208,8 +208,11 @@ class StageStore(StoreRuns, StoreIntegrity):
             if exc.filename is None and exc.errno is not None:  # name what failed to be written
                 raise OSError(exc.errno, exc.strerror, str(tmp)) from exc
             raise
-        except BaseException:
+        except BaseException as exc:
             discard(tmp)
+            cause = exc.__cause__  # a stage's failure: its OSError from Zarr names no file
+            if isinstance(cause, OSError) and cause.errno is not None and cause.filename is None:
+                cause.filename = str(tmp)
             raise
 
     def _commit(self, tmp: Path, stage: str, key: str, replace: bool) -> None:

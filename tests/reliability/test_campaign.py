@@ -7,6 +7,8 @@ from __future__ import annotations
 import errno
 import json
 import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -15,7 +17,7 @@ import pytest
 
 from physanim.store import StageStore, write_array
 from physanim.store.stage_store import TMP
-from tests.commands import TOY, invoke
+from tests.commands import ROOT, TOY, invoke, physanim_env
 from tests.reliability.campaign import DAMAGE_KINDS, KINDS, Campaign, layout_problems
 from tests.reliability.injector import inject
 
@@ -61,6 +63,27 @@ def test_a_failed_commit_of_a_forced_output_puts_the_old_one_back(
     monkeypatch.undo()
     assert store.has("s", key) and store.provenance("s", key)["manifest"] == before
     assert os.listdir(store.root / TMP) == [] and final.is_dir()
+
+
+def test_a_full_disk_inside_a_stage_names_the_output_being_written(
+    toy_config: Path, tmp_path: Path
+) -> None:
+    """ENOSPC on a chunk write inside a stage's compute (Zarr's error names no file): the one
+    error line names the temporary output; nothing is left of it."""
+    root = tmp_path / "data" / "runs" / "store.zarr"
+    args = ["run", "-p", TOY, "-c", str(toy_config), "--local", "--set", "source.n_frames=30"]
+    env = physanim_env(PHYSANIM_INJECT="enospc:25", PHYSANIM_INJECT_ROOT=str(root))
+    full = subprocess.run(
+        [sys.executable, "-m", "tests.reliability.injector", *args],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert full.returncode == 1 and "Traceback" not in full.stderr, full.stderr
+    errors = [line for line in full.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, full.stderr
+    head = f"error: stage 'source' failed: no space left writing {root}/.tmp/source-"
+    assert errors[0].startswith(head), errors[0]
+    assert "(No space left on device)" in errors[0]
+    assert os.listdir(root / TMP) == []
 
 
 def test_status_names_damaged_metadata_in_full(toy_config: Path, tmp_path: Path) -> None:
