@@ -5,11 +5,19 @@
   a plausible distance (``FACE_DISTANCE_M``) for the depth scale;
 - physically implausible depth frames (a damaged file: ROS1 bags carry no checksums):
   depth that is mostly discontinuous (random bytes), or a valid-pixel fraction or median
-  depth that jumps away from both neighbouring frames and back.
+  depth that jumps away from both neighbouring frames and back;
+- damaged colour (and depth) pixels: a run of pixels, consecutive in the file's raster order,
+  that differs from both neighbouring frames while those agree, and holds random bytes
+  (neighbours in the run differ wildly) or zeros (a zeroed block; zeroed depth is invalid
+  depth, already marked so). A
+  frame image is stored row after row, so damaged bytes land on such a run; a face moving or
+  blinking changes a region, smooth from pixel to pixel, not a run of noise. Damage smaller
+  than ``MIN_RUN`` pixels cannot be told from the image and passes.
 """
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from physanim.capture.frames import Capture, Problem
@@ -23,6 +31,17 @@ MIN_CENTRAL_VALID = 0.1
 #: A frame whose valid neighbouring pixels differ by more than 10 % of their depth in more
 #: than this fraction of the pairs is not a depth image of surfaces.
 MAX_ROUGH_FRACTION = 0.3
+#: Damaged runs: at least this many consecutive pixels (raster order; gaps of up to two
+#: pixels bridged) that differ by more than ``RUN_DIFF`` levels (colour, any channel) or
+#: ``RUN_DIFF_REL`` (depth, relative) from both neighbouring frames, which agree within a
+#: quarter of that; random when neighbouring pixels of the run differ by more than
+#: ``RUN_NOISE`` levels (``RUN_NOISE_REL`` of depth) on average, zeroed when (nearly) all
+#: pixels are 0.
+MIN_RUN, RUN_DIFF, RUN_NOISE = 16, 40, 50
+#: ... and the pixels right above and below the run are outliers in less than this fraction
+#: (damage follows the raster; things in the scene extend over several rows).
+MAX_RIM_OUTLIERS = 0.3
+RUN_DIFF_REL, RUN_NOISE_REL = 0.1, 0.2
 #: Spike thresholds against both neighbouring frames: valid fraction (absolute), median
 #: depth (relative); the neighbours must agree with each other to a fifth of that.
 VALID_JUMP, MEDIAN_JUMP = 0.2, 0.25
@@ -100,8 +119,136 @@ def _spikes(values: np.ndarray, jump: float, relative: bool) -> np.ndarray:
     return out
 
 
+def _neighbours(t: int, n: int) -> tuple[int, int]:
+    """The two frames frame ``t`` of ``n`` (n >= 3) is compared with: the previous and the
+    next, or the next (previous) two at the ends."""
+    return (t + 1, t + 2) if t == 0 else (t - 2, t - 1) if t == n - 1 else (t - 1, t + 1)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of the runs of at least ``MIN_RUN`` True values of a flat bool array,
+    gaps of up to two False values bridged."""
+    m = mask.copy()
+    m[1:] |= mask[:-1]
+    m[:-1] |= mask[1:]  # dilated by one: gaps of two close
+    closed = m.copy()
+    closed[1:] &= m[:-1]
+    closed[:-1] &= m[1:]  # eroded back
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], closed.view(np.int8), [0]))))
+    starts, stops = edges[::2], edges[1::2]
+    keep = stops - starts >= MIN_RUN
+    return list(zip(starts[keep].tolist(), stops[keep].tolist(), strict=True))
+
+
+def _raster_shaped(outlier: np.ndarray, start: int, stop: int, width: int) -> bool:
+    """Whether the run [start, stop) of a flat outlier mask (H * W) has a damaged block's
+    shape: the pixels right above and below it (outside the run) are mostly not outliers,
+    where an object that moves or blinks extends over the rows around too."""
+    idx = np.arange(start, stop)
+    above, below = idx - width, idx + width
+    rim = np.concatenate((above[above < start][above[above < start] >= 0],
+                          below[below >= stop][below[below >= stop] < len(outlier)]))  # fmt: skip
+    return not len(rim) or outlier[rim].mean() < MAX_RIM_OUTLIERS
+
+
+def _channel_max(image: np.ndarray) -> np.ndarray:
+    """Per pixel (H, W) the largest channel of an image (H, W, C) uint8 (fast: a dilation
+    along the interleaved channels, then every C-th byte)."""
+    h, w, ch = image.shape
+    kernel = np.ones((1, ch), np.uint8)
+    return cv2.dilate(image.reshape(h, w * ch), kernel, anchor=(0, 0))[:, ::ch]
+
+
+def _damaged_run(values: np.ndarray, noise: float) -> str | None:
+    """What a run of pixel values (N, C) holds if it looks like damaged bytes, else None."""
+    if (values == 0).all(axis=1).mean() >= 0.9:  # the ends may be partly zeroed pixels
+        return "zeroed bytes"
+    step = np.abs(np.diff(values, axis=0)).max(axis=1)
+    if step.mean() > noise:
+        return "random values"
+    return None
+
+
+def damaged_color_frames(color: np.ndarray) -> dict[int, str]:
+    """Positions t of colour frames (T, H, W, 3) uint8 holding a damaged run -> where."""
+    n = len(color)
+    out: dict[int, str] = {}
+    if n < 3:
+        return out
+    for t in range(n):
+        i, j = _neighbours(t, n)
+        a, b, c = color[i], color[j], color[t]
+        outlier = (
+            (_channel_max(cv2.absdiff(c, a)) > RUN_DIFF)
+            & (_channel_max(cv2.absdiff(c, b)) > RUN_DIFF)
+            & (_channel_max(cv2.absdiff(a, b)) <= RUN_DIFF // 4)
+        ).ravel()
+        if np.count_nonzero(outlier) < MIN_RUN:
+            continue
+        flat = c.reshape(-1, c.shape[-1]).astype(np.int16)
+        runs = [(a, b, _damaged_run(flat[a:b], RUN_NOISE)) for a, b in _runs(outlier)]
+        found = _blocks(outlier, [r for r in runs if r[2] is not None], c.shape[1])
+        if found:
+            out[t] = found
+    return out
+
+
+def _blocks(outlier: np.ndarray, runs: list[tuple[int, int, str | None]], width: int) -> str:
+    """Where the first damaged block is ('' if none): ``runs`` (start, stop, what) of damaged
+    values, merged when less than a row apart (moving parts of the scene, where the
+    neighbouring frames disagree, interrupt a damaged block row by row), then checked for a
+    block's raster shape."""
+    merged: list[list] = []
+    for start, stop, what in runs:
+        if merged and start - merged[-1][1] < width:
+            merged[-1][1] = stop
+        else:
+            merged.append([start, stop, what])
+    for start, stop, what in merged:
+        if _raster_shaped(outlier, start, stop, width):
+            return (
+                f"{stop - start} pixels from row {start // width}, column {start % width} hold "
+                f"{what}, unlike the neighbouring frames"
+            )
+    return ""
+
+
+def damaged_depth_runs(depth: np.ndarray) -> dict[int, str]:
+    """Positions t of depth frames (T, H, W) m, NaN invalid, holding a run of random valid
+    depth values that differs from both neighbouring frames -> where."""
+    n = len(depth)
+    out: dict[int, str] = {}
+    if n < 3:
+        return out
+    for t in range(n):
+        i, j = _neighbours(t, n)
+        a, b, d = depth[i], depth[j], depth[t]
+        with np.errstate(invalid="ignore"):
+            changed = (
+                (np.abs(d - a) > RUN_DIFF_REL * a)
+                & (np.abs(d - b) > RUN_DIFF_REL * b)
+                & (np.abs(a - b) <= RUN_DIFF_REL / 4 * np.minimum(a, b))
+            )
+        appeared = np.isfinite(d) & np.isnan(a) & np.isnan(b)  # valid where both are not
+        outlier = (changed | appeared).ravel()
+        if np.count_nonzero(outlier) < MIN_RUN:
+            continue
+        flat = d.ravel()
+        runs = []
+        for start, stop in _runs(outlier):
+            run = flat[start:stop]
+            rel = np.abs(np.diff(run)) / np.minimum(run[1:], run[:-1])
+            if np.isfinite(rel).all() and rel.mean() > RUN_NOISE_REL:
+                runs.append((start, stop, "random depths"))
+        found = _blocks(outlier, runs, d.shape[1])
+        if found:
+            out[t] = found
+    return out
+
+
 def implausible_depth_frames(capture: Capture) -> dict[int, str]:
     """Frame numbers (``capture.frame_index``) of physically implausible depth -> why."""
+    runs = damaged_depth_runs(capture.depth)
     rough = rough_fraction(capture.depth)
     valid_spike = _spikes(capture.valid_fraction, VALID_JUMP, relative=False)
     median_spike = _spikes(capture.depth_median, MEDIAN_JUMP, relative=True)
@@ -114,6 +261,8 @@ def implausible_depth_frames(capture: Capture) -> dict[int, str]:
             why.append(f"valid pixels {capture.valid_fraction[t]:.0%} (neighbour frames differ)")
         if median_spike[t]:
             why.append(f"median depth {capture.depth_median[t]:.2f} m (neighbour frames differ)")
+        if t in runs:
+            why.append(runs[t])
         if why:
             out[n] = "; ".join(why)
     return out
@@ -161,5 +310,17 @@ def check_capture(capture: Capture, params: IngestParams) -> tuple[list[Problem]
         out.append(Problem(level, (
             f"{where}: {len(bad)} physically implausible depth frame(s), the file is probably "
             f"damaged: {shown}{more}; {action}"
+        )))  # fmt: skip
+    damaged = damaged_color_frames(capture.color)
+    if damaged:
+        names = capture.frame_index.tolist()
+        shown = "; ".join(f"frame {names[t]}: {why}" for t, why in list(damaged.items())[:3])
+        more = f" (and {len(damaged) - 3} more)" if len(damaged) > 3 else ""
+        keep = params.implausible_depth != "error"
+        out.append(Problem("warning" if keep else "error", (
+            f"{where}: {len(damaged)} damaged colour frame(s), the file is probably damaged: "
+            f"{shown}{more}; "
+            + ("kept as read (ingest.implausible_depth=" + params.implausible_depth + ")"
+               if keep else "re-copy the recording, or set ingest.implausible_depth=keep")
         )))  # fmt: skip
     return out, bad

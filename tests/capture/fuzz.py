@@ -7,9 +7,10 @@ Each damaged input must be either
 - refused with a ``CaptureError`` (or ``FileNotFoundError``) whose message names the damaged
   file (``color/000001.png``, ``intrinsic.json``) and, for a damaged field, the field; or
 - accepted, and then its result equals the undamaged one (colour, depth, intrinsics, frame
-  numbers, timestamps, frame rate, depth scale). For a bag, which has no checksums, accepted
-  damage may change at most as many colour/depth values as bytes were damaged (the reader
-  reads what the file holds, and nothing more goes wrong).
+  numbers, timestamps, frame rate, depth scale). A bag has no checksums: damage smaller than
+  what ingest's checks can see (``physanim.capture.validate.MIN_RUN`` pixels) may pass, so an
+  accepted damaged bag may differ in at most 48 colour values and 16 depths, and have depth
+  made invalid (zeroed), never more values than bytes were damaged.
 
 Anything else (another exception: a traceback for the user; or a result that differs) is a
 defect. ``damage(kind, rng)`` picks a mutation of that kind at random; ``judge`` runs one.
@@ -34,6 +35,7 @@ import yaml
 from physanim.capture.frames import Capture, CaptureError
 from physanim.capture.ingest import load_capture
 from physanim.capture.params import IngestParams
+from physanim.capture.validate import MIN_RUN
 
 #: kinds of damaged input -> the recording (source) they belong to
 KINDS = {
@@ -372,23 +374,25 @@ def damage(kind: str, copy: Path, rng: random.Random) -> Damage:
     return Damage(kind, f"{mutation} ({what})", copy, changed_bytes=n)
 
 
-def differences(cap: Capture, ref: Capture, bag: bool) -> tuple[list[str], int]:
-    """(fields that differ, number of colour + depth values that differ) of two captures."""
+def differences(cap: Capture, ref: Capture, bag: bool) -> tuple[list[str], int, int, int]:
+    """(fields that differ, colour values that differ, depth values changed to another valid
+    depth, depth values made invalid) of two captures."""
     out = []
     if cap.frame_index.tolist() != ref.frame_index.tolist():
-        return [f"frames {cap.frame_index.tolist()} != {ref.frame_index.tolist()}"], 0
+        return [f"frames {cap.frame_index.tolist()} != {ref.frame_index.tolist()}"], 0, 0, 0
     if cap.color.shape != ref.color.shape or cap.depth.shape != ref.depth.shape:
-        return [f"shape {cap.color.shape} != {ref.color.shape}"], 0
+        return [f"shape {cap.color.shape} != {ref.color.shape}"], 0, 0, 0
     if not np.allclose(cap.K, ref.K, rtol=1e-9, atol=0):
         out.append(f"K {cap.K.tolist()} != {ref.K.tolist()}")
     if cap.fps != ref.fps or cap.depth_scale != ref.depth_scale:
         out.append(f"fps/depth_scale {cap.fps}/{cap.depth_scale} != {ref.fps}/{ref.depth_scale}")
     if not np.allclose(cap.timestamps, ref.timestamps, rtol=0, atol=1e-3 if bag else 1e-12):
         out.append(f"timestamps {cap.timestamps.tolist()} != {ref.timestamps.tolist()}")
-    n = int(np.count_nonzero(cap.color != ref.color))
-    same_depth = (cap.depth == ref.depth) | (np.isnan(cap.depth) & np.isnan(ref.depth))
-    n += int(np.count_nonzero(~same_depth))
-    return out, n
+    n_color = int(np.count_nonzero(cap.color != ref.color))
+    valid, was_valid = np.isfinite(cap.depth), np.isfinite(ref.depth)
+    n_depth = int(np.count_nonzero(valid & (~was_valid | (cap.depth != ref.depth))))
+    n_invalid = int(np.count_nonzero(~valid & was_valid))
+    return out, n_color, n_depth, n_invalid
 
 
 def named(message: str, dmg: Damage) -> bool:
@@ -411,9 +415,19 @@ def judge(pristine: Pristine, kind: str, rng: random.Random, work: Path) -> Outc
         return Outcome(dmg, "refused" if named(message, dmg) else "unnamed", message)
     except Exception:  # anything else reaches the user as a traceback
         return Outcome(dmg, "traceback", traceback.format_exc())
-    diffs, n = differences(cap, pristine.captures[source], bag=source == "bag")
-    allowed = dmg.changed_bytes if source == "bag" else 0
-    if diffs or n > allowed:
-        diffs.append(f"{n} colour/depth values differ (at most {allowed} may)")
+    ref = pristine.captures[source]
+    diffs, n_color, n_depth, n_invalid = differences(cap, ref, source == "bag")
+    if source == "bag":  # no checksums: damage below what the checks can see may pass
+        small = n_color <= 3 * MIN_RUN and n_depth <= MIN_RUN
+        within = n_color + n_depth + n_invalid <= dmg.changed_bytes
+        if not (small and within):
+            diffs.append(
+                f"{n_color} colour values, {n_depth} depths and {n_invalid} valid depths differ "
+                f"({dmg.changed_bytes} bytes changed; undetected damage may change at most "
+                f"{3 * MIN_RUN} colour values and {MIN_RUN} depths, and make depth invalid)"
+            )
+    elif n_color or n_depth or n_invalid:
+        diffs.append(f"{n_color} colour values, {n_depth + n_invalid} depths differ")
+    if diffs:
         return Outcome(dmg, "wrong", "; ".join(diffs))
     return Outcome(dmg, "accepted", "; ".join(cap.warnings))

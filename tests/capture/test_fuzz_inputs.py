@@ -58,3 +58,40 @@ def test_damaged_colour_frame_is_named_by_check(pristine: Pristine, tmp_path: Pa
     errors = [line for line in out.stdout.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "color/000001.png: truncated at byte 5000" in errors[0], errors
     assert "Traceback" not in out.stdout + out.stderr
+
+
+@pytest.mark.parametrize("fill", ["random", "zeros"])
+def test_damaged_colour_frame_in_a_bag_is_named(
+    pristine: Pristine, tmp_path: Path, fill: str
+) -> None:
+    """A bag has no checksums: 6 KB of random bytes (or zeros) inside the colour image of
+    frame 1 are found by the colour check and named (bag, frame, row), not passed on."""
+    import numpy as np
+    from rosbags.rosbag1 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    from physanim.capture.frames import CaptureError
+    from physanim.capture.ingest import CaptureWarning, load_capture
+    from physanim.capture.params import IngestParams
+
+    bag = pristine.copy("bag", tmp_path / "data")
+    data = bytearray(bag.read_bytes())
+    typestore = get_typestore(Stores.ROS1_NOETIC)
+    with Reader(bag) as reader:
+        (conn,) = [c for c in reader.connections if c.topic.endswith("Color_0/image/data")]
+        raws = [raw for _, _, raw in reader.messages(connections=[conn])]
+    pixels = bytes(typestore.deserialize_ros1(raws[1], conn.msgtype).data)
+    middle = len(pixels) // 2
+    offset = data.find(pixels[middle : middle + 4096])  # face rows: unique bytes
+    assert offset > 0
+    block = np.random.default_rng(1).bytes(6000) if fill == "random" else bytes(6000)
+    data[offset : offset + 6000] = block
+    bag.write_bytes(bytes(data))
+    row = middle // (3 * 640)
+    with pytest.raises(
+        CaptureError,
+        match=rf"capture\.bag: 1 damaged colour frame.*frame 1: \d+ pixels from row {row}",
+    ):
+        load_capture(bag)
+    with pytest.warns(CaptureWarning, match=r"damaged colour frame.*kept as read"):
+        load_capture(bag, IngestParams(implausible_depth="keep"))
