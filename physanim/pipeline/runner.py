@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import socket
 import time
@@ -94,7 +95,7 @@ def execute_stage(
             progress=progress or _no_progress,
         )
         try:
-            summary = dict(spec.compute(ctx) or {})
+            summary = flag_nan_figures(dict(spec.compute(ctx) or {}))
         except Exception as exc:
             raise StageFailed(spec.name, exc) from exc
         if summary:
@@ -103,6 +104,28 @@ def execute_stage(
     return StageResult(
         spec.name, entry.key, "ran", seconds, summary, started, f"{_HOST}:{os.getpid()}"
     )
+
+
+def _nan_figures(value: Any, name: str = "") -> list[str]:
+    """Dotted names of the NaN numbers in a summary value (nested dicts and lists)."""
+    if isinstance(value, float) and math.isnan(value):
+        return [name]
+    if isinstance(value, Mapping):
+        return [n for k, v in value.items() for n in _nan_figures(v, f"{name}.{k}" if name else k)]
+    if isinstance(value, list | tuple):
+        return [n for i, v in enumerate(value) for n in _nan_figures(v, f"{name}[{i}]")]
+    return []
+
+
+def flag_nan_figures(summary: dict[str, Any]) -> dict[str, Any]:
+    """``summary`` with a warning naming its NaN figures, if any (a figure that could not be
+    computed must not pass as a number: the CLI prints the warning, the report shows it)."""
+    nan = _nan_figures({k: v for k, v in summary.items() if k != "warnings"})
+    if not nan:
+        return summary
+    shown = ", ".join(nan[:6]) + (f" and {len(nan) - 6} more" if len(nan) > 6 else "")
+    warning = f"{len(nan)} figure(s) of this stage are NaN (not computed): {shown}"
+    return {**summary, "warnings": [*summary.get("warnings", []), warning]}
 
 
 def _varying_inputs(

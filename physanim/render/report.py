@@ -24,6 +24,8 @@ header h1{margin:0;font-size:1.6em} header p{margin:4px 0 0;opacity:.8;font-size
 h2{font-size:1.2em;margin:32px 0 12px;padding-bottom:4px;border-bottom:2px solid #d0d7de}
 section.card{background:#fff;border:1px solid #d0d7de;border-radius:8px;padding:16px 20px;
 margin-bottom:16px}
+section.warnings{background:#fff1f0;border-color:#cf222e;margin-top:24px}
+section.warnings h2{color:#cf222e;margin-top:0;border-bottom-color:#f5c2c0}
 video{width:100%;border-radius:6px;background:#000}
 .grid{display:grid;grid-template-columns:repeat(auto-fit,minmax(460px,1fr));gap:16px}
 figure{margin:0;background:#fff;border:1px solid #d0d7de;border-radius:8px;padding:10px}
@@ -160,6 +162,7 @@ def build_report(
     variants: Mapping[str, Mapping[str, Any]] | None = None,
     galleries: Mapping[str, Sequence[tuple[str, str | Path]]] | None = None,
     tables: Mapping[str, tuple[Sequence[str], Sequence[Sequence[Any]]]] | None = None,
+    warnings: Sequence[str] = (),
     subtitle: str = "",
 ) -> Path:
     """Write ``out_dir/index.html`` and return its path.
@@ -171,7 +174,7 @@ def build_report(
     ``params`` (dict) and any further entries (e.g. ``provenance``) shown as JSON in a
     collapsible block.  ``variants``: variant -> measure -> value, shown as one column per
     variant.  ``galleries``: variant -> (caption, file) videos (.mp4/.webm) and images, one
-    card per variant side by side.
+    card per variant side by side. ``warnings``: lines shown first, in a red box.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -182,6 +185,12 @@ def build_report(
         f"<title>{_e(title)}</title><style>{_CSS}</style></head><body>",
         f"<header><h1>{_e(title)}</h1><p>{_e(subtitle)} generated {stamp}</p></header><main>",
     ]
+    if warnings:
+        items = "".join(f"<li>{_e(w)}</li>" for w in warnings)
+        parts.append(
+            f"<section class='card warnings'><h2>Warnings ({len(warnings)})</h2>"
+            f"<ul>{items}</ul></section>"
+        )
     if video is not None:
         src = _e(_rel(video, out_dir, "video"))
         parts.append(

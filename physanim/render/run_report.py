@@ -137,6 +137,11 @@ def write_run_report(
             images.insert(0, (f"Panel at the jaw-drop peak (frame {peak})", panel))
         variants = _compare_variants(pipeline, spec, store, out_dir, images, keys[spec.name])
 
+    warnings = [
+        f"{s.name}: {w}"
+        for s in shown
+        for w in store.provenance(s.name, keys[s.name]).get("summary", {}).get("warnings", [])
+    ]
     key_figures: dict[str, Any] = {}
     for s in shown:
         for name, value in store.provenance(s.name, keys[s.name]).get("summary", {}).items():
@@ -169,6 +174,7 @@ def write_run_report(
         key_figures=key_figures,
         stage_table=stage_table,
         variants=variants,
+        warnings=warnings,
         subtitle=f"store {store.root}",
     )
 

@@ -17,6 +17,8 @@ __all__ = ["TrackingError", "check_tracks", "face_scale"]
 SCALE_RANGE = {"markers": (0.75, 1.33), "markerless": (0.5, 2.2)}
 #: Below this fraction of landmark-frames tracked, the stage warns.
 MIN_TRACKED_FRACTION = 0.5
+#: Below this fraction of frames with a face found (any landmark tracked), the stage warns.
+MIN_FACE_FRAMES = 0.97
 
 SCALE_FIX = (
     "the depth scale or the intrinsics are wrong (RGBD folder: depth_scale in intrinsic.json "
@@ -58,6 +60,12 @@ def check_tracks(tracks: Tracks, template: np.ndarray, backend: str, what: str) 
     if np.isfinite(scale) and not lo <= scale <= hi:
         raise TrackingError(f"the tracked face is {scale:.2f} x the size of {what}: {SCALE_FIX}")
     warnings = []
+    faces = int(seen.any(axis=1).sum())
+    if faces < MIN_FACE_FRAMES * n_t:
+        warnings.append(
+            f"a face was found in only {faces} of {n_t} frames ({faces / n_t:.0%}); the frames "
+            "without one are filled from their neighbours: check the framing and lighting"
+        )
     if seen.mean() < MIN_TRACKED_FRACTION:
         frames = int(seen.any(axis=1).sum())
         warnings.append(

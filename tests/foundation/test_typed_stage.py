@@ -96,3 +96,28 @@ def test_stage_inputs_computes_what_is_missing_and_reads_it_typed(tmp_path):
     store = StageStore(config.dataset.store_path)
     planned = {e.stage: e.action for e in make_plan(TWO, config, store)}
     assert planned == {"ramp": "cached", "gain": "run"}  # only the upstream was computed
+
+
+def test_nan_figures_of_a_summary_are_flagged(tmp_path):
+    """A figure that could not be computed (NaN) becomes a warning naming it, through the
+    runner: the CLI prints it and the report shows it at the top."""
+    from physanim.pipeline.runner import flag_nan_figures
+
+    nan = float("nan")
+    flagged = flag_nan_figures({"rms": nan, "ok": 1.0, "inner": {"x": [1.0, nan]}})
+    assert flagged["warnings"] == [
+        "2 figure(s) of this stage are NaN (not computed): rms, inner.x[1]"
+    ]
+    assert flag_nan_figures({"ok": 1.0, "warnings": ["w"]}) == {"ok": 1.0, "warnings": ["w"]}
+
+    def flat(params: GainParams, ramp: Ramp) -> Ramp:
+        return Ramp(ramp.values, ramp.unit, summary={"mean_error_m": nan})
+
+    pipeline = Pipeline(
+        "nan", (STAGES[0], StageSpec.typed("flat", flat, "1")), default_config=Path("n.yaml")
+    )
+    config = pipeline.config_model().model_validate({"dataset": {"dir": str(tmp_path)}})
+    store = StageStore(config.dataset.store_path)
+    execute_plan_locally(pipeline, config, make_plan(pipeline, config, store))
+    summary = store.provenance("flat")["summary"]
+    assert summary["warnings"] == ["1 figure(s) of this stage are NaN (not computed): mean_error_m"]

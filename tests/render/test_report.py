@@ -82,3 +82,13 @@ def test_run_report_compares_the_most_recent_variants_and_always_this_run():
     assert recent_variants(shown[:3], "k1", 8) == ["k0", "k2", "k1"]
     assert recent_variants(shown[:3], None, 2) == ["k1", "k2"]
     assert recent_variants(shown, "k0", 1) == ["k0"]
+
+
+def test_warnings_open_the_report(tmp_path):
+    """Stage warnings (a tracker that lost frames, figures that are NaN) come first, in a box
+    of their own, escaped; without warnings there is no box."""
+    lines = ["track: a face was found in only 57 of 90 frames (63%)", "fit: rms_mm is <NaN>"]
+    text = build_report(tmp_path / "a", title="t", warnings=lines).read_text()
+    box = text.index("<section class='card warnings'><h2>Warnings (2)</h2>")
+    assert box < text.index("</header>") + 30 and "rms_mm is &lt;NaN&gt;" in text
+    assert "Warnings" not in build_report(tmp_path / "b", title="t").read_text()

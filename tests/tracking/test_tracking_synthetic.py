@@ -141,3 +141,26 @@ def test_smoothers_reduce_noise_without_lag():
     lag = np.mean((oe - truth)[20:, 1])
     slow = np.mean((one_euro(noisy, fps, min_cutoff=3.0, beta=0.0) - truth)[20:, 1])
     assert abs(lag) < 3e-4 < abs(slow)  # the speed term removes most of the lag (< 0.3 mm)
+
+
+def test_frames_without_a_face_are_warned_about():
+    """A tracker that loses more than a few percent of the frames says so (the markerless
+    demo found a face in 63 % of them and the run looked normal); one frame in 40 lost is
+    within the margin."""
+    from physanim.tracking.checks import check_tracks
+    from physanim.tracking.tracks import Tracks
+
+    template = np.random.default_rng(1).normal(scale=0.03, size=(12, 3))
+    points = np.repeat(template[None] + [0, 0, 0.5], 40, axis=0)
+    confidence = np.ones((40, 12))
+
+    def warnings(lost_frames: int) -> list[str]:
+        conf = confidence.copy()
+        conf[:lost_frames] = 0.0
+        pts = np.where(conf[..., None] > 0, points, np.nan)
+        tracks = Tracks(np.zeros((40, 12, 2)), pts, conf, np.tile(np.eye(4), (40, 1, 1)))
+        return check_tracks(tracks, template, "markers", "the template")
+
+    assert warnings(1) == []
+    found = warnings(4)
+    assert len(found) == 1 and "a face was found in only 36 of 40 frames (90%)" in found[0]
