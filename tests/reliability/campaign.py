@@ -289,7 +289,7 @@ class ToyDag(Dag):
         ref = self.work / "reference"
         for v in range(len(self.variants)):
             fresh = self.work / f"count-{v}"
-            with inject("count", 0, fresh) as seen:
+            with inject("count", 0, fresh / "runs" / "store.zarr") as seen:
                 invoke(*self.run_args(v, fresh))
             self.counts[v] = seen.by_stage
             shutil.rmtree(fresh)
