@@ -95,3 +95,20 @@ def test_damaged_colour_frame_in_a_bag_is_named(
         load_capture(bag)
     with pytest.warns(CaptureWarning, match=r"damaged colour frame.*kept as read"):
         load_capture(bag, IngestParams(implausible_depth="keep"))
+
+
+def test_run_only_ingest_names_a_greyscale_frame(pristine: Pristine, tmp_path: Path) -> None:
+    """`physanim run --only ingest` on an RGBD folder where one colour frame was re-exported
+    in greyscale (accepted before: a grey frame among colour ones): one line naming it."""
+    import cv2
+
+    rgbd = pristine.copy("rgbd", tmp_path / "data")
+    frame = rgbd / "color" / "000002.png"
+    assert cv2.imwrite(str(frame), cv2.imread(str(frame), cv2.IMREAD_GRAYSCALE))
+    out = invoke("run", "--only", "ingest", "--local", "--dataset", str(rgbd))
+    text = out.stdout + out.stderr
+    assert out.returncode == 1, text
+    errors = [line for line in text.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, text
+    assert "color/000002.png: a greyscale image among colour frames" in errors[0], errors
+    assert "Traceback" not in out.stdout + out.stderr
