@@ -270,6 +270,8 @@ def status(
             if e.damage:  # the damaged file's path, or the output's with the file in it
                 at = "" if str(where) in e.damage else f" ({where})"
                 print(f"damaged: {e.stage}/{e.key[:12]}{at}: {e.damage}")
+        for meta in store.damaged_groups():
+            print(f"damaged: group metadata {meta} is unreadable; `physanim verify` rewrites it")
 
 
 @app.command()
@@ -284,7 +286,16 @@ def verify(target: Target) -> None:
         removed = []
     for leftover in removed:
         print(f"removed abandoned partial output {leftover.name}")
+    try:  # the store's and stages' empty groups: rewriting them loses nothing
+        repaired = store.repair_groups()
+    except OSError:
+        repaired = []
+    for meta in repaired:
+        print(f"rewrote unreadable group metadata {meta}")
     checked = damaged = 0
+    for meta in store.damaged_groups():  # (a read-only store)
+        damaged += 1
+        print(f"damaged: group metadata {meta} is unreadable")
     for stage in store.stages():
         for key in store.all_keys(stage):
             checked += 1

@@ -42,14 +42,24 @@ def write_atomic(path: Path, text: str) -> None:
         raise
 
 
+def group_metadata_ok(meta: Path) -> bool:
+    """Whether ``meta`` is the readable ``zarr.json`` of a group."""
+    try:
+        document = json.loads(meta.read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(document, dict) and document.get("node_type") == "group"
+
+
 def ensure_group(path: Path) -> None:
-    """Make ``path`` an (empty) Zarr v3 group if it is not one; safe when processes race.
+    """Make ``path`` an (empty) Zarr v3 group if it is not one (or its metadata is unreadable:
+    the store's and the stages' groups hold nothing else); safe when processes race.
 
     The metadata is written to a temporary file and renamed into place, so a concurrent
     reader never sees a half-written zarr.json (Zarr's own writer gives no such guarantee).
     """
     meta = path / "zarr.json"
-    if meta.exists():
+    if group_metadata_ok(meta):
         return
     path.mkdir(parents=True, exist_ok=True)
     write_atomic(meta, json.dumps({"zarr_format": 3, "node_type": "group", "attributes": {}}))
@@ -237,6 +247,20 @@ class StoreIntegrity:
         except (OSError, ValueError, KeyError, TypeError):
             return None
         return attrs if isinstance(attrs, dict) else None
+
+    def damaged_groups(self) -> list[Path]:
+        """The unreadable ``zarr.json`` of the store's group and of its stages' groups."""
+        metas = [self.root / "zarr.json"] if self.root.is_dir() else []
+        metas += sorted(self.root.glob("[!.]*/zarr.json")) if self.root.is_dir() else []
+        return [m for m in metas if m.exists() and not group_metadata_ok(m)]
+
+    def repair_groups(self) -> list[Path]:
+        """Rewrite the unreadable metadata of the store's and its stages' groups (empty groups:
+        nothing is lost); returns what was rewritten."""
+        damaged = self.damaged_groups()
+        for meta in damaged:
+            ensure_group(meta.parent)
+        return damaged
 
     # -- quarantine and temporaries --------------------------------------------------------
     def quarantine(self, stage: str, key: str, reason: str) -> Path:

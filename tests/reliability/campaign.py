@@ -381,27 +381,36 @@ class Campaign:
         before: set[tuple[str, str]],
         damaged: tuple[str, str, str, Path] | None = None,
         touched: set[str] | frozenset[str] = frozenset(),
+        group_meta: Path | None = None,
     ) -> None:
-        """verify, status, re-run, compare, and look for anything partial (``touched``: the
-        stages the fault may have recomputed, compared by key only when not deterministic)."""
+        """status, verify, re-run, compare, and look for anything partial (``damaged``: the
+        output and file a damage fault hit, ``group_meta``: the store's or a stage's group
+        metadata it cut; ``touched``: the stages the fault may have recomputed, compared by
+        key only when not deterministic)."""
         store = dag.store
+        flags = ("--verify",) if rec.kind in ("chunk_corrupt", "meta_bitflip") else ()
+        status = self.cli("status", *dag.args(variants[0]), *flags)
         verify = self.cli("verify", *dag.args(variants[0]))
         rec.removed_by_verify = verify.stdout.count("removed abandoned partial output")
-        if damaged is None:
-            if verify.returncode != 0:
-                rec.problems.append(f"verify rc={verify.returncode}: {verify.stdout[-800:]}")
-        else:
+        if damaged is not None:
             stage, key, rel, path = damaged
+            rec.named_by_status = _names(status.stdout, stage, key, rel, path)
             rec.named_by_verify = verify.returncode == 1 and _names(
                 verify.stdout, stage, key, rel, path
             )
-            flags = ("--verify",) if rec.kind in ("chunk_corrupt", "meta_bitflip") else ()
-            status = self.cli("status", *dag.args(variants[0]), *flags)
-            rec.named_by_status = _names(status.stdout, stage, key, rel, path)
             if not rec.named_by_verify:
                 rec.problems.append(f"verify did not name {stage}/{rel}: {verify.stdout[-800:]}")
             if not rec.named_by_status:
                 rec.problems.append(f"status did not name {stage}/{rel}: {status.stdout[-1500:]}")
+        elif verify.returncode != 0:
+            rec.problems.append(f"verify rc={verify.returncode}: {verify.stdout[-800:]}")
+        if group_meta is not None:  # verify rewrites it (an empty group), saying so
+            rec.named_by_status = f"damaged: group metadata {group_meta} " in status.stdout
+            rec.named_by_verify = f"rewrote unreadable group metadata {group_meta}" in verify.stdout
+            if not rec.named_by_status or not rec.named_by_verify:
+                rec.problems.append(
+                    f"{group_meta} not named: {status.stdout[-300:]}, {verify.stdout}"
+                )
         tmp = store.root / TMP
         if tmp.is_dir() and any(tmp.iterdir()):
             rec.problems.append(f".tmp/ not empty after verify: {os.listdir(tmp)}")
@@ -551,8 +560,8 @@ class Campaign:
         where = target.relative_to(store.root).as_posix().replace(key, key[:12])
         rec.detail = f"{where} ({' '.join(dag.variants[v]) or 'default config'}): {rec.detail}"
         rec.fired = True
-        if not rel:  # outside any output: verify has nothing to name; the store must cope
-            self.settle(dag, rec, [v], before)
+        if not rel:  # the store's or a stage's group: holds no output
+            self.settle(dag, rec, [v], before, group_meta=target)
             return
         self.settle(dag, rec, [v], before - {(stage, key)}, damaged=(stage, key, rel, target))
 

@@ -10,15 +10,23 @@ import os
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+import zarr
 
 from physanim.store import StageStore, write_array
 from physanim.store.stage_store import TMP
 from tests.commands import ROOT, TOY, invoke, physanim_env
-from tests.reliability.campaign import DAMAGE_KINDS, KINDS, Campaign, layout_problems
+from tests.reliability.campaign import (
+    DAMAGE_KINDS,
+    KINDS,
+    TOY_STAGES,
+    Campaign,
+    layout_problems,
+)
 from tests.reliability.injector import inject
 
 
@@ -121,6 +129,29 @@ def test_a_flipped_bit_in_an_outputs_metadata_is_found(toy_config: Path, tmp_pat
     assert fixed.returncode == 0 and "total/" in fixed.stdout + fixed.stderr
     assert invoke("verify", *args).returncode == 0
     assert store.provenance("total")["summary"]["total"] == 2 * (499500 * 8 + 1000 * 28)
+
+
+def test_unreadable_group_metadata_of_the_store_is_named_and_rewritten(
+    toy_config: Path, tmp_path: Path
+) -> None:
+    """The store's and a stage's zarr.json hold an empty group: cut short, status names them,
+    verify rewrites them (saying so) and the store opens as a Zarr group again."""
+    args = ["-p", TOY, "-c", str(toy_config)]
+    assert invoke("run", *args, "--local").returncode == 0
+    store = StageStore(tmp_path / "data" / "runs" / "store.zarr")
+    metas = [store.root / "zarr.json", store.root / "scale" / "zarr.json"]
+    for meta in metas:
+        meta.write_text(meta.read_text()[:7])
+    status = invoke("status", *args)
+    assert all(f"damaged: group metadata {m} is unreadable" in status.stdout for m in metas)
+    verify = invoke("verify", *args)
+    assert verify.returncode == 0, verify.stdout
+    assert all(f"rewrote unreadable group metadata {m}" in verify.stdout for m in metas)
+    assert store.damaged_groups() == [] and layout_problems(store) == []
+    with warnings.catch_warnings():  # (.runs, .tmp and LATEST are not Zarr nodes)
+        warnings.simplefilter("ignore")
+        groups = set(zarr.open_group(store.root, mode="r").group_keys())
+    assert groups == set(TOY_STAGES)
 
 
 def test_verify_removes_what_a_killed_writer_left(toy_config: Path, tmp_path: Path) -> None:
