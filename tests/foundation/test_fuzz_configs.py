@@ -10,7 +10,6 @@ test (the long form: ``python -m tests.capture.fuzz_long``); ``STATS`` counts th
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import tempfile
@@ -20,8 +19,9 @@ from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin
 
 import annotated_types as at
+import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from flows.dags import FACE, get_pipeline
@@ -152,9 +152,9 @@ def yaml_text(value: Any) -> str:
     """``value`` as YAML flow text, as a user types it after ``--set key=``."""
     if isinstance(value, float) and not math.isfinite(value):
         return ".nan" if math.isnan(value) else (".inf" if value > 0 else "-.inf")
-    if isinstance(value, str | list | dict | tuple) or value is None:
-        return json.dumps(list(value) if isinstance(value, tuple) else value, ensure_ascii=False)
-    return yaml.safe_dump(value, default_flow_style=True).removesuffix("\n...\n").strip()
+    value = list(value) if isinstance(value, tuple) else value
+    text = yaml.safe_dump(value, default_flow_style=True, width=10**9)  # escapes non-ASCII
+    return text.removesuffix("\n").removesuffix("\n...").strip()
 
 
 def get(tree: Any, dotted: str) -> Any:
@@ -173,6 +173,11 @@ def same(given: Any, got: Any) -> bool:
     """Whether the validated ``got`` is the value ``given`` (pydantic's lax conversions)."""
     if isinstance(given, list | tuple) and isinstance(got, list | tuple):
         return len(given) == len(got) and all(map(same, given, got))
+    if isinstance(given, str) and isinstance(got, bool):  # pydantic's words for booleans
+        words = {"0": False, "off": False, "f": False, "false": False, "n": False,
+                 "no": False, "1": True, "on": True, "t": True, "true": True, "y": True,
+                 "yes": True}  # fmt: skip
+        return words.get(given.strip().lower()) is got
     if isinstance(given, str) and isinstance(got, int | float) and not isinstance(got, bool):
         try:
             return float(given) == got
@@ -213,7 +218,7 @@ def judge(files: list[str], sets: list[str], source: str, key: str, value: Any) 
     return "accepted"
 
 
-@settings(FUZZ, max_examples=EXAMPLES or 300)
+@settings(FUZZ, max_examples=EXAMPLES or 1000)
 @given(case=overrides())
 def test_set_overrides(case: tuple[str, Any, bool | None]) -> None:
     """``--set key=value``: accepted exactly, or refused naming the --set and the key."""
@@ -223,7 +228,7 @@ def test_set_overrides(case: tuple[str, Any, bool | None]) -> None:
     STATS[("--set value", outcome)] += 1
 
 
-@settings(FUZZ, max_examples=EXAMPLES or 150)
+@settings(FUZZ, max_examples=EXAMPLES or 400)
 @given(case=overrides())
 def test_config_files(case: tuple[str, Any, bool | None]) -> None:
     """The same values in a ``-c`` file: accepted exactly, or refused naming file and key."""
@@ -241,7 +246,7 @@ def test_config_files(case: tuple[str, Any, bool | None]) -> None:
 CHARS = st.characters(codec="utf-8", exclude_categories=["Cs"])
 
 
-@settings(FUZZ, max_examples=EXAMPLES or 200)
+@settings(FUZZ, max_examples=EXAMPLES or 500)
 @given(
     text=st.one_of(
         st.text(CHARS, max_size=40),  # anything
@@ -292,11 +297,12 @@ def sweep_files(draw: st.DrawFn) -> dict[str, Any]:
     return spec
 
 
-@settings(FUZZ, max_examples=EXAMPLES // 4 or 40)
+@settings(FUZZ, max_examples=EXAMPLES // 4 or 120)
 @given(spec=sweep_files())
 def test_sweep_files(spec: dict[str, Any]) -> None:
     """A sweep file is planned (every variant has the sweep's values) or refused naming the
     sweep file."""
+    assume(not _astral(spec))  # a known defect: test_sweep_keeps_characters_beyond_the_bmp
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "sweep.yaml"
         datasets = spec.get("datasets")
@@ -322,3 +328,23 @@ def test_sweep_files(spec: dict[str, Any]) -> None:
             if key not in spec.get("grid", {}) and not given_by_variant:
                 assert same(value, get(cfg, key)), f"{v.name}: {key} {get(cfg, key)!r}"
     STATS[("sweep file", "accepted")] += 1
+
+
+def _astral(tree: Any) -> bool:
+    """Whether a string in ``tree`` holds a character beyond U+FFFF."""
+    return any(ord(ch) > 0xFFFF for ch in yaml.safe_dump(tree, allow_unicode=True))
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="physanim/pipeline/sweep.py passes a sweep's values on as json.dumps(v) text, "
+    "which writes a character beyond U+FFFF as a surrogate pair; YAML reads that as two lone "
+    "surrogates (found by test_sweep_files; fix: json.dumps(v, ensure_ascii=False))",
+)
+def test_sweep_keeps_characters_beyond_the_bmp(tmp_path: Path) -> None:
+    path = tmp_path / "sweep.yaml"
+    spec = {"datasets": [str(tmp_path / "ds")], "set": {"materials.model.description": "😀"}}
+    path.write_text(yaml.safe_dump(spec))
+    plan = plan_sweep(path, get_pipeline)
+    (cfg,) = plan.configs.values()
+    assert cfg.materials.model.description == "😀"
