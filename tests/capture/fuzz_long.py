@@ -16,6 +16,16 @@ from collections import Counter
 from pathlib import Path
 
 
+def mutation_class(mutation: str) -> str:
+    """A mutation's kind without its numbers: 'truncate', 're-encoded: resize', 'scaled'..."""
+    text = mutation.split(" (")[0]
+    if text.startswith("set to "):
+        return "wrong type (" + text.removeprefix("set to ") + ")"
+    if text.endswith(" swapped"):
+        return "two fields swapped"
+    return text
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--capture", type=int, default=60, help="damaged files per kind")
@@ -27,6 +37,7 @@ def main() -> int:
     from tests.foundation import test_fuzz_configs as cfg
 
     rows: list[tuple[str, int, int, int, int]] = []
+    by_mutation: Counter[tuple[str, str]] = Counter()
     defects = []
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -37,6 +48,7 @@ def main() -> int:
                 outcome = judge(pristine, kind, random.Random(f"{args.seed}-{kind}-{i}"),
                                 Path(tmp) / "work")  # fmt: skip
                 counts[outcome.verdict] += 1
+                by_mutation[(mutation_class(outcome.damage.mutation), outcome.verdict)] += 1
                 if outcome.defect:
                     defects.append(outcome.line())
             n_bad = counts["traceback"] + counts["unnamed"] + counts["wrong"]
@@ -60,6 +72,11 @@ def main() -> int:
     print("|---|---:|---:|---:|---:|")
     for kind, n, acc, ref, bad in rows:
         print(f"| {kind} | {n} | {acc} | {ref} | {bad} |")
+    print("\n| capture mutation | accepted | refused | defects |\n|---|---:|---:|---:|")
+    for name in sorted({m for m, _ in by_mutation}):
+        bad = sum(by_mutation[(name, v)] for v in ("traceback", "unnamed", "wrong"))
+        acc, ref = by_mutation[(name, "accepted")], by_mutation[(name, "refused")]
+        print(f"| {name} | {acc} | {ref} | {bad} |")
     print(f"\ncapture: {t_capture:.0f} s, configs: {t_configs:.0f} s; defects: {len(defects)}")
     for line in defects:
         print("DEFECT", line)
