@@ -3,7 +3,10 @@
 Frames are image files whose stem is the frame number (``000012.png``); a number absent
 from both streams is a gap on the frame grid, an image whose partner (depth, right) is
 absent is an error. Colour images are 8-bit RGB, RGBA or greyscale (greyscale is repeated
-into the three channels).
+into the three channels; a greyscale frame among colour ones, or the reverse, is refused).
+Every image file's integrity is checked before it is decoded (``physanim.capture.image_file``:
+a PNG's checksums and completeness, a JPEG's end marker): a damaged frame is refused, naming
+the file.
 """
 
 from __future__ import annotations
