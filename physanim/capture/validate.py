@@ -9,10 +9,10 @@
 - damaged colour (and depth) pixels: a run of pixels, consecutive in the file's raster order,
   that differs from both neighbouring frames while those agree, and holds random bytes
   (neighbours in the run differ wildly) or zeros (a zeroed block; zeroed depth is invalid
-  depth, already marked so). A
-  frame image is stored row after row, so damaged bytes land on such a run; a face moving or
-  blinking changes a region, smooth from pixel to pixel, not a run of noise. Damage smaller
-  than ``MIN_RUN`` pixels cannot be told from the image and passes.
+  depth, already marked so). A frame image is stored row after row, so damaged bytes land on
+  such a run; a face moving or blinking changes a region, smooth from pixel to pixel, not a
+  run of noise. Damage smaller than ``MIN_RUN`` pixels cannot be told from the image and
+  passes.
 """
 
 from __future__ import annotations
@@ -38,10 +38,10 @@ MAX_ROUGH_FRACTION = 0.3
 #: ``RUN_NOISE`` levels (``RUN_NOISE_REL`` of depth) on average, zeroed when (nearly) all
 #: pixels are 0.
 MIN_RUN, RUN_DIFF, RUN_NOISE = 16, 40, 50
+RUN_DIFF_REL, RUN_NOISE_REL = 0.1, 0.2
 #: ... and the pixels right above and below the run are outliers in less than this fraction
 #: (damage follows the raster; things in the scene extend over several rows).
 MAX_RIM_OUTLIERS = 0.3
-RUN_DIFF_REL, RUN_NOISE_REL = 0.1, 0.2
 #: Spike thresholds against both neighbouring frames: valid fraction (absolute), median
 #: depth (relative); the neighbours must agree with each other to a fifth of that.
 VALID_JUMP, MEDIAN_JUMP = 0.2, 0.25
@@ -145,9 +145,9 @@ def _raster_shaped(outlier: np.ndarray, start: int, stop: int, width: int) -> bo
     shape: the pixels right above and below it (outside the run) are mostly not outliers,
     where an object that moves or blinks extends over the rows around too."""
     idx = np.arange(start, stop)
-    above, below = idx - width, idx + width
-    rim = np.concatenate((above[above < start][above[above < start] >= 0],
-                          below[below >= stop][below[below >= stop] < len(outlier)]))  # fmt: skip
+    above = idx[(idx - width < start) & (idx - width >= 0)] - width
+    below = idx[(idx + width >= stop) & (idx + width < len(outlier))] + width
+    rim = np.concatenate((above, below))
     return not len(rim) or outlier[rim].mean() < MAX_RIM_OUTLIERS
 
 
@@ -186,7 +186,7 @@ def damaged_color_frames(color: np.ndarray) -> dict[int, str]:
         if np.count_nonzero(outlier) < MIN_RUN:
             continue
         flat = c.reshape(-1, c.shape[-1]).astype(np.int16)
-        runs = [(a, b, _damaged_run(flat[a:b], RUN_NOISE)) for a, b in _runs(outlier)]
+        runs = [(s, e, _damaged_run(flat[s:e], RUN_NOISE)) for s, e in _runs(outlier)]
         found = _blocks(outlier, [r for r in runs if r[2] is not None], c.shape[1])
         if found:
             out[t] = found
