@@ -5,13 +5,16 @@ Version history: CHANGELOG.md.
 
 from __future__ import annotations
 
+import hashlib
+from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from physanim.mesh.params import TetraParams
-from physanim.pipeline import StageContext, StageOutput, StageSpec
+from physanim.pipeline import DatasetParams, StageContext, StageOutput, StageSpec
 from tasks.align import AlignOutput
 
 
@@ -42,6 +45,7 @@ def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraPara
     from physanim.mesh.tetra import (
         label_nodes,
         landmark_nodes,
+        load_tet_mesh,
         skin_anchors,
         tetrahedralize_surface,
     )
@@ -57,10 +61,13 @@ def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraPara
     )
     report = ctx.progress("tetra")
     report(0, 1)
-    mesh, quality = tetrahedralize_surface(surface.vertices, surface.faces, params)
+    if params.mesh_file:
+        mesh, quality = load_tet_mesh(params.mesh_file, surface.vertices, surface.faces, params)
+    else:
+        mesh, quality = tetrahedralize_surface(surface.vertices, surface.faces, params)
     report(1, 1)
     mouth = align.mouth()
-    cut = cut_tets(mesh.nodes, mesh.tets, mouth)
+    cut, hinged = cut_tets(mesh.nodes, mesh.tets, mouth).face_connected()
     nodes = cut.nodes(mesh.nodes)
     labels = label_nodes(mesh, surface, params)
     skin, bone = labels.skin[cut.parent], labels.bone[cut.parent]
@@ -68,8 +75,9 @@ def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraPara
         nodes, skin, cut.side, align.landmarks, mouth.side(align.landmarks)
     )
     summary = dict(
-        quality.as_dict(), lip_seam_faces=cut.n_seam_faces, seam_nodes=len(nodes) - len(mesh.nodes)
-    )
+        quality.as_dict(), lip_seam_faces=cut.n_seam_faces,
+        seam_nodes=len(nodes) - len(np.unique(cut.parent)), hinged_tets_dropped=hinged,
+    )  # fmt: skip
     return TetraOutput(
         nodes, cut.elements, skin, bone, cut.side, landmark_node, landmark_distance,
         skin_anchors(nodes, bone, surface), surface.thickness, quality.as_dict(),
@@ -77,10 +85,19 @@ def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraPara
     )  # fmt: skip
 
 
+def fingerprint(dataset: DatasetParams, params: TetraParams) -> Mapping[str, Any]:
+    """The content of ``tetra.mesh_file`` when one is given (an edited mesh re-runs tetra)."""
+    if not params.mesh_file:
+        return {}
+    path = Path(params.mesh_file)
+    return {"mesh_file": hashlib.sha256(path.read_bytes()).hexdigest() if path.exists() else None}
+
+
 SPEC = StageSpec.typed(
     "tetra",
     compute,
-    version="3",
+    version="4",
     doc="tissue volume (skin + bone-side offset), fTetWild tets, quality, node labels",
+    fingerprint=fingerprint,
     varies=True,  # fTetWild's mesh differs from run to run, even on one thread
 )

@@ -194,6 +194,13 @@ class TetraParams(BaseModel):
     mesh_attempts: int = Field(
         3, ge=1, le=10, description="fTetWild runs at most, to meet min_dihedral_deg (count)."
     )
+    mesh_file: str | None = Field(
+        None,
+        description="A tet mesh of this tissue volume to use instead of fTetWild's (fTetWild "
+        "gives another mesh on every run): .npz with nodes (n, 3) m and tets (m, 4), its path "
+        "relative to the working directory; refused when its volume is not the tissue's. "
+        "null: fTetWild.",
+    )
     sliver_dihedral_deg: float = Field(
         5.0, gt=0.0, lt=60.0, description="Tets with a dihedral angle below this are slivers, deg."
     )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -237,6 +238,48 @@ def tetrahedralize_surface(
             stacklevel=2,
         )
     return mesh, quality
+
+
+def enclosed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Volume (m^3) enclosed by a closed, outward-oriented triangle surface (N, 3) / (M, 3)."""
+    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
+    return float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0)
+
+
+def load_tet_mesh(
+    path: str | Path, vertices: np.ndarray, faces: np.ndarray, params: TetraParams
+) -> tuple[TetMesh, TetQuality]:
+    """The tet mesh saved in ``path`` (.npz: ``nodes`` (n, 3) m, ``tets`` (m, 4)) as the mesh
+    of the closed surface ``vertices`` (N, 3) m / ``faces`` (M, 3): oriented and checked as
+    fTetWild's. ValueError naming the file when it is unreadable or does not fill that
+    surface (volumes more than 5 % apart: a mesh of another tissue)."""
+    path = Path(path)
+    try:
+        with np.load(path) as data:
+            nodes = np.asarray(data["nodes"], dtype=np.float64)
+            tets = np.asarray(data["tets"], dtype=np.int64)
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(
+            f"tetra.mesh_file {path}: not an .npz with 'nodes' and 'tets' ({exc})"
+        ) from None
+    if nodes.ndim != 2 or nodes.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4:
+        raise ValueError(
+            f"tetra.mesh_file {path}: nodes {nodes.shape} and tets {tets.shape} must be "
+            "(n, 3) and (m, 4)"
+        )
+    if tets.size == 0 or tets.min() < 0 or tets.max() >= len(nodes):
+        raise ValueError(f"tetra.mesh_file {path}: tets index outside the {len(nodes)} nodes")
+    tets, flipped = orient_and_check(nodes, tets, params)
+    mesh = TetMesh(nodes=nodes, tets=tets)
+    quality = quality_report(mesh, params, flipped)
+    target = abs(enclosed_volume(vertices, faces))
+    if not abs(quality.volume_m3 - target) <= 0.05 * target:
+        raise ValueError(
+            f"tetra.mesh_file {path}: its volume {quality.volume_m3 * 1e6:.1f} cm^3 is not the "
+            f"tissue's {target * 1e6:.1f} cm^3: a mesh of another scan or tissue settings; "
+            "remove tetra.mesh_file to mesh this one"
+        )
+    return mesh, replace(quality, attempts=0)
 
 
 def _ftetwild(

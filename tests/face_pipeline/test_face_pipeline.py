@@ -113,24 +113,26 @@ def test_skull_holds_the_mandible_turns_and_landmarks_pull_patches(demo_run) -> 
     turn = Rotation.from_rotvec(angle[:, None] * axis).as_matrix() - np.eye(3)
     expected = weight[None, :, None] * np.einsum("tij,kj->tki", turn, nodes[bone] - pivot)
     np.testing.assert_allclose(disp[:, bone], expected, atol=1e-6)  # m, float32 output
-    # the chin's bone side turns fully: 19, 26, 29 and 33 nodes on four coarse meshes (the
-    # 20 once asserted failed at 19: fTetWild meshes differently every run), 11-13 % of the
-    # 233-255 bone-side nodes where counted
-    assert (weight == 1).sum() >= 0.05 * len(bone)
+    # the chin's bone side turns fully: 28 of the fixed coarse mesh's 240 bone-side nodes
+    # (11.7 %; 14 % on the full demo mesh)
+    assert (weight == 1).sum() >= 0.10 * len(bone)
     skin = np.nonzero(mesh["skin"][...])[0]
     springs = sim["spring_nodes"][...]
-    # (the default mesh: 22 % of the skin, see the README; this coarse one has 4-7 times fewer
-    # skin nodes and every patch still reaches 3 of them)
-    assert np.isin(springs, skin).all() and 0 < len(springs) <= 0.75 * len(skin)
+    # (the full demo mesh: 22 % of the skin; the fixed coarse mesh: 137 of 276 skin nodes,
+    # 49.6 %, as it has 4-7 times fewer skin nodes and every patch still reaches 3 of them)
+    assert np.isin(springs, skin).all() and 0 < len(springs) <= 0.55 * len(skin)
     free = np.setdiff1d(skin, springs)
     moving = np.linalg.norm(disp[:, free], axis=-1).max(axis=0) > 1e-4
-    assert moving.mean() > 0.3  # the physics carries the motion beyond the patches
+    assert (
+        moving.mean() > 0.9
+    )  # 0.993 on the fixed coarse mesh  # the physics carries the motion beyond the patches
 
 
 def test_the_simulated_face_performs_the_capture(demo_run) -> None:
-    """Against the demo's ground truth: the FEM mouth opens at the jaw-drop by about as much
-    as the actor's (coarse mesh: within a factor 1.5), the FEM skin moves like the actor far
-    better than a face that does not move (relative error 1), and no stress hot spot."""
+    """Against the demo's ground truth, on the fixed coarse mesh (measured: the mouth opens by
+    6.68 mm against the actor's 6.23 mm; relative displacement error 0.41 at the jaw drop and
+    0.50 at the smile; peak / 99th-percentile stress 2.48): the FEM mouth opens by as much as
+    the actor's within 20 %, the errors stay within 0.05 of those figures, no hot spot."""
     _, _, store, _ = demo_run
     summary = store.provenance("evaluate")["summary"]
     evaluated = store.open("evaluate")
@@ -138,9 +140,9 @@ def test_the_simulated_face_performs_the_capture(demo_run) -> None:
     opened = {m: gap[m]["jaw_open"] - evaluated[f"lip_gap_{m}"][0] * 1e3 for m in ("truth", "fem")}
     message = f"lip gap {gap}, opening {opened}, fidelity {fidelity}"
     assert opened["truth"] > 3.0, message  # the actor's mouth opens by millimetres
-    assert opened["truth"] / 1.5 < opened["fem"] < 1.5 * opened["truth"], message
-    assert fidelity["jaw_open"]["overall"] < 0.6 and fidelity["smile"]["overall"] < 0.8, message
-    assert store.provenance("simulate")["summary"]["peak_to_p99_von_mises"] <= 5.0
+    assert opened["truth"] / 1.2 < opened["fem"] < 1.2 * opened["truth"], message
+    assert fidelity["jaw_open"]["overall"] < 0.46 and fidelity["smile"]["overall"] < 0.55, message
+    assert store.provenance("simulate")["summary"]["peak_to_p99_von_mises"] <= 3.0
 
 
 def test_material_edit_reruns_materials_onward_only(model2_run) -> None:
@@ -168,16 +170,13 @@ def test_regional_models_act_where_they_are_edited(model_sweep) -> None:
     1 < model 3), and the edit acts there: model 3's change of each node's peak displacement
     from model 2's, averaged over the right philtrum's free nodes, is several times its
     average over the free nodes 20 mm or more from that region (measured on the full demo
-    mesh: +3.6 % there, +2.1 % 5-10 mm away, +0.5 % at 10-20 mm, 0.0 % beyond). The left
-    philtrum is not that far field: it borders the right one (a third of its nodes are shared
-    on the full mesh) and its change (+3.3 %) is within mesh noise of the right's; on this
-    coarse mesh, made differently by fTetWild on every run, right and left measured +4.4 to
-    +9.5 % and +2.7 to +5.5 %. The seed's right-side stretch E_R (eq 4.39) is not compared:
-    it is taken between landmarks, which the drive's springs hold to the capture, so the
-    three models' max |E_R| differ by about 1e-4 relative. Over six later coarse meshes model 3's
-    right philtrum peak was +2.0 to +7.1 % over model 2's (the 2 % once asserted failed at
-    +1.99 %), and over five of them the mean node change there +2.8 to +7.6 % against 0.05 to
-    0.06 % far away: 1 % is asserted for both."""
+    mesh: +3.6 % there, +2.1 % 5-10 mm away, +0.5 % at 10-20 mm, 0.0 % beyond), and larger
+    than the left philtrum's, which borders it. The seed's right-side stretch E_R (eq 4.39) is
+    not compared: it is taken between landmarks, which the drive's springs hold to the
+    capture, so the three models' max |E_R| differ by about 1e-4 relative. On the fixed
+    coarse mesh: model 3's right philtrum peak +3.2 % over model 2's (asserted: 2.5 %), the
+    mean node change +4.9 % there (asserted: 4 %), +3.0 % in the left philtrum, 0.05 % far
+    away."""
     from physanim.names import name_index
 
     data, variants, _, _ = model_sweep
@@ -188,7 +187,7 @@ def test_regional_models_act_where_they_are_edited(model_sweep) -> None:
         peak[model] = summary["philtrum_peak_mm"]
     print("philtrum peaks (mm)", peak)
     assert peak["model2"]["right"] < peak["model1"]["right"] < peak["model3"]["right"]
-    assert peak["model3"]["right"] / peak["model2"]["right"] - 1.0 >= 0.01
+    assert peak["model3"]["right"] / peak["model2"]["right"] - 1.0 >= 0.025
 
     keys = variants["model2"]
     mesh = store.open("tetra", keys["tetra"])
@@ -203,8 +202,13 @@ def test_regional_models_act_where_they_are_edited(model_sweep) -> None:
     far = np.linalg.norm(nodes - nodes[region].mean(axis=0), axis=1) >= 0.02
     far = free[far[free] & (moved["model2"][free] > 1e-4)]  # nodes that move at all
     near_change, far_change = change[region].mean(), np.abs(change[far]).mean()
-    print(f"peak motion change: right philtrum {near_change:+.4f}, 20 mm away {far_change:.4f}")
-    assert near_change >= 0.01 and near_change > 4 * far_change
+    left = name_index(list(materials.attrs["region_names"]), ["cphs_L"])[0]
+    left_nodes = np.intersect1d(np.unique(tets[materials["tet_labels"][:] == left]), free)
+    left_change = change[left_nodes].mean()
+    print(f"peak motion change: right philtrum {near_change:+.4f}, left {left_change:+.4f}, "
+          f"20 mm away {far_change:.4f}")  # fmt: skip
+    assert near_change >= 0.04 and near_change > 4 * far_change
+    assert near_change > left_change + 0.01
 
 
 def test_model_sweep_computes_shared_stages_once(model_sweep, demo_run) -> None:

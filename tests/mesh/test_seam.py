@@ -140,3 +140,26 @@ def test_embedding_reproduces_affine_motion_and_respects_the_seam(tmp_path) -> N
     moved = w @ drop
     upper = MOUTH.side(pts) == UPPER
     assert upper.sum() > 10 and np.all(moved[upper, 1] == 0.0)
+
+
+def test_tets_hinged_by_an_edge_or_a_vertex_are_dropped():
+    """Two tets sharing a face stay; one joined to them by an edge only and one by a vertex
+    only go (each turns about its hinge without strain), with their unused nodes; the kept
+    nodes keep their parents and sides, renumbered in order."""
+    from physanim.mesh.seam import Cut
+
+    nodes = np.array(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1],  # two tets on face 1-2-3
+         [1, 1, -1], [2, 0, -1],  # a tet on edge 1-2
+         [-1, -1, -1], [-1, 0, -1], [0, -1, -1]],  # a tet on vertex 0
+        dtype=float,
+    )  # fmt: skip
+    tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4], [1, 2, 5, 6], [0, 7, 8, 9]])
+    side = np.arange(len(nodes), dtype=np.int8) % 3
+    cut = Cut(tets, np.arange(len(nodes)), side, 0)
+    kept, dropped = cut.face_connected()
+    assert dropped == 2
+    np.testing.assert_array_equal(kept.elements, [[0, 1, 2, 3], [1, 2, 3, 4]])
+    np.testing.assert_array_equal(kept.parent, [0, 1, 2, 3, 4])
+    np.testing.assert_array_equal(kept.side, side[:5])
+    assert Cut(tets[:2], np.arange(5), side[:5], 0).face_connected()[1] == 0

@@ -191,3 +191,24 @@ def test_coarse_face_tets_are_positive_and_labelled(skin, landmarks):
     # Skin nodes sit in front of bone nodes: larger z on average (actor frame, +z out).
     assert mesh.nodes[labels.skin, 2].mean() > mesh.nodes[labels.bone, 2].mean()
     assert set(np.unique(surface.part)) == {PART_SKIN, PART_BONE, 2}
+
+
+def test_a_saved_tet_mesh_is_loaded_for_its_own_volume_only(tmp_path):
+    """``tetra.mesh_file``: a mesh saved as .npz is used (oriented, its quality reported) for
+    the surface it fills; one of another volume, or an unreadable file, is refused naming it."""
+    from physanim.mesh.tetra import enclosed_volume, load_tet_mesh
+    from tests.fem.fem_meshes import box_mesh
+
+    size = np.array([0.04, 0.03, 0.02])
+    v, f = box_surface(size)
+    assert enclosed_volume(v, f) == pytest.approx(np.prod(size), rel=1e-12)
+    nodes, tets = box_mesh((4, 3, 2), tuple(size))
+    np.savez(tmp_path / "box.npz", nodes=nodes, tets=tets[:, [1, 0, 2, 3]])  # negative order
+    mesh, q = load_tet_mesh(tmp_path / "box.npz", v, f, TetraParams())
+    assert np.all(tet_volumes(mesh.nodes, mesh.tets) > 0) and q.n_inverted_input == len(tets)
+    assert q.volume_m3 == pytest.approx(np.prod(size)) and q.attempts == 0
+    with pytest.raises(ValueError, match=r"box.npz: its volume 24.0 cm\^3 is not the tissue's"):
+        load_tet_mesh(tmp_path / "box.npz", v * 1.1, f, TetraParams())
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="bad.npz: not an .npz with 'nodes' and 'tets'"):
+        load_tet_mesh(tmp_path / "bad.npz", v, f, TetraParams())
