@@ -105,6 +105,34 @@ def performance_summary(
     if drive.jaw is not None:
         summary["jaw_max_angle_deg"] = round(float(np.degrees(drive.jaw.angle.max())), 3)
         summary["jaw_pivot_mm"] = [round(float(x) * 1e3, 2) for x in drive.jaw.pivot]
-    if drive.warnings:
-        summary["warnings"] = drive.warnings
+    warnings = list(drive.warnings)
+    runaway = runaway_warning(result.displacements, drive)
+    if runaway:
+        warnings.append(runaway)
+    if warnings:
+        summary["warnings"] = warnings
     return summary
+
+
+#: A free node moving this many times farther than anything the drive moves is a fault.
+RUNAWAY_FACTOR = 3.0
+
+
+def runaway_warning(displacements: NDArray, drive: FaceDrive) -> str | None:
+    """A warning when a node of the simulation (T, N, 3) m moved more than
+    ``RUNAWAY_FACTOR`` times the drive's largest motion (prescribed nodes, spring targets):
+    tissue pulled by the skin and the jaw cannot outrun them, so such a node is a mesh
+    mechanism or a blow-up, not physics; None otherwise."""
+    driven = [np.abs(drive.prescribed_traj).max(initial=0.0)]
+    if drive.springs is not None:
+        driven.append(np.abs(drive.springs.targets).max(initial=0.0))
+    reach = max(driven)
+    moved = np.linalg.norm(displacements, axis=-1).max(axis=0)
+    node = int(moved.argmax())
+    if reach <= 0 or moved[node] <= RUNAWAY_FACTOR * reach:
+        return None
+    return (
+        f"node {node} moved {moved[node] * 1e3:.1f} mm, {moved[node] / reach:.0f} times the "
+        f"drive's largest motion ({reach * 1e3:.1f} mm): a mechanism in the tissue mesh or "
+        "an unstable step, not physics; remesh (physanim run --force tetra) or lower simulate.dt"
+    )
