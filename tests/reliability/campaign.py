@@ -354,7 +354,13 @@ class Campaign:
         """``physanim ARGS`` in a child process through the injector."""
         env = physanim_env()
         if inject:
-            env |= {"PHYSANIM_INJECT": inject, "PHYSANIM_INJECT_ROOT": str(root)}
+            report = self.work / "injector-report.json"
+            report.unlink(missing_ok=True)
+            env |= {
+                "PHYSANIM_INJECT": inject,
+                "PHYSANIM_INJECT_ROOT": str(root),
+                "PHYSANIM_INJECT_REPORT": str(report),
+            }
         return subprocess.Popen(
             [sys.executable, "-m", "tests.reliability.injector", *args],
             cwd=ROOT,
@@ -505,6 +511,11 @@ class Campaign:
         out, err = proc.communicate(timeout=600)
         rec.run_rc = proc.returncode
         rec.fired = proc.returncode != 0
+        report = self.work / "injector-report.json"
+        if proc.returncode not in (0, -9) and kind not in ("efbig", "kill9_timer"):
+            seen = json.loads(report.read_text()) if report.exists() else {}
+            if not seen.get("fired"):  # the run failed, but not of the fault
+                rec.problems.append(f"the run failed before its fault: {err[-600:]}")
         if proc.returncode == -9:
             pass
         elif proc.returncode != 0:
