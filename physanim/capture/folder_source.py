@@ -3,7 +3,8 @@
 Frames are image files whose stem is the frame number (``000012.png``); a number absent
 from both streams is a gap on the frame grid, an image whose partner (depth, right) is
 absent is an error. Colour images are 8-bit RGB, RGBA or greyscale (greyscale is repeated
-into the three channels; a greyscale frame among colour ones, or the reverse, is refused).
+into the three channels; a greyscale frame among colour ones, or the reverse, is refused:
+``ColorFormats``).
 Every image file's integrity is checked before it is decoded (``physanim.capture.image_file``:
 a PNG's checksums and completeness, a JPEG's end marker): a damaged frame is refused, naming
 the file.
@@ -85,14 +86,9 @@ def read_color(path: Path) -> np.ndarray:
     return read_color_frame(path)[0]
 
 
-def read_color_frame(path: Path, channels: int | None = None) -> tuple[np.ndarray, int]:
-    """(8-bit RGB image (H, W, 3) uint8, channels of the file) of a colour (or greyscale)
-    file.
-
-    ``channels``: the other frames' format (1 greyscale, 3 RGB, 4 RGBA); a greyscale frame
-    among colour frames, or a colour frame among greyscale ones, is refused (a frame
-    re-exported or damaged: its colours would be silently wrong). RGB and RGBA mix (the
-    alpha channel is dropped)."""
+def read_color_frame(path: Path) -> tuple[np.ndarray, int]:
+    """(8-bit RGB image (H, W, 3) uint8, channels of the file: 1 greyscale, 3 RGB, 4 RGBA)
+    of a colour (or greyscale) file."""
     img = _decode(path)
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[..., 0]
@@ -101,15 +97,44 @@ def read_color_frame(path: Path, channels: int | None = None) -> tuple[np.ndarra
             f"{path}: unsupported colour pixel format ({img.dtype}, shape {img.shape}); "
             "expected 8-bit RGB, RGBA or greyscale"
         )
-    if channels is not None and (color_channels(img) == 1) != (channels == 1):
-        this, others = ("greyscale", "colour") if img.ndim == 2 else ("colour", "greyscale")
-        raise CaptureError(
-            f"{path}: a {this} image among {others} frames; re-export this frame like the others"
-        )
     if img.ndim == 2:
         return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB), 1
     code = cv2.COLOR_BGR2RGB if img.shape[2] == 3 else cv2.COLOR_BGRA2RGB
     return cv2.cvtColor(img, code), color_channels(img)
+
+
+class ColorFormats:
+    """Whether the colour frames read so far are greyscale or colour; a frame unlike the
+    others is refused, naming it (a frame re-exported or damaged: its colours would be
+    silently wrong). RGB and RGBA frames mix (the alpha channel is dropped). While the
+    frames are evenly split (frame 0 unlike frame 1) the odd one is not known yet: the next
+    frame decides, or ``finish`` names both."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[Path, bool]] = []
+
+    def add(self, path: Path, channels: int) -> None:
+        self.seen.append((path, channels == 1))
+        grey = sum(g for _, g in self.seen)
+        colour = len(self.seen) - grey
+        if grey and colour and grey != colour:
+            odd_grey = grey < colour
+            odd = next(p for p, g in self.seen if g == odd_grey)
+            usual = next(p for p, g in self.seen if g != odd_grey)
+            this, others = ("greyscale", "colour") if odd_grey else ("colour", "greyscale")
+            raise CaptureError(
+                f"{odd}: a {this} image among {others} frames (such as {usual.name}); "
+                "re-export this frame like the others"
+            )
+
+    def finish(self) -> None:
+        grey = [p for p, g in self.seen if g]
+        colour = [p for p, g in self.seen if not g]
+        if grey and colour:
+            raise CaptureError(
+                f"{grey[0]}: greyscale but {colour[0]} is colour; the frames must be all "
+                "colour or all greyscale"
+            )
 
 
 def read_depth(path: Path) -> np.ndarray:
@@ -150,9 +175,10 @@ def read_rgbd_folder(
     missing = check_gaps(idx, str(root), params.max_missing_fraction)
     color = np.empty((len(idx), *size, 3), np.uint8)
     raw = np.empty((len(idx), *size), np.uint16)
-    channels = None
+    formats = ColorFormats()
     for i, n in enumerate(idx.tolist()):
-        (c, channels), d = read_color_frame(colors[n], channels), read_depth(depths[n])
+        (c, channels), d = read_color_frame(colors[n]), read_depth(depths[n])
+        formats.add(colors[n], channels)
         _same_size(c, d, colors[n], depths[n], "colour and depth must have the same size "
                    "(register depth to colour first)")  # fmt: skip
         if c.shape[:2] != size:
@@ -163,6 +189,7 @@ def read_rgbd_folder(
         color[i], raw[i] = c, d
         if progress is not None:
             progress(i + 1, len(idx))
+    formats.finish()
     return Capture(
         color=color,
         depth=depth_to_metres(raw, scale),
@@ -191,10 +218,11 @@ def read_stereo_folder(
     color = np.empty((len(idx), h, w, 3), np.uint8)
     depth = np.empty((len(idx), h, w), np.float32)
     limits = np.zeros((len(idx), 2))
-    channels = None
+    formats = ColorFormats()
     for i, n in enumerate(idx.tolist()):
-        left, channels = read_color_frame(lefts[n], channels)
-        right, channels = read_color_frame(rights[n], channels)
+        (left, lc), (right, rc) = read_color_frame(lefts[n]), read_color_frame(rights[n])
+        formats.add(lefts[n], lc)
+        formats.add(rights[n], rc)
         _same_size(
             left, right, lefts[n], rights[n], "left and right images must have the same size"
         )
@@ -203,6 +231,7 @@ def read_stereo_folder(
         color[i], depth[i], limits[i] = matcher.compute(left, right, lefts[n])
         if progress is not None:
             progress(i + 1, len(idx))
+    formats.finish()
     warnings = []
     near, far = params.stereo_depth_range_m
     for end, frac, limit in (("far", limits[:, 0], far), ("near", limits[:, 1], near)):
