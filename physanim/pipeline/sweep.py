@@ -66,7 +66,9 @@ class Variant:
 
 
 def _sets(mapping: dict[str, Any]) -> list[str]:
-    return [f"{k}={json.dumps(v)}" for k, v in mapping.items()]
+    # ensure_ascii=False: a character beyond U+FFFF would be written as a surrogate pair,
+    # which YAML reads back as two broken characters
+    return [f"{k}={json.dumps(v, ensure_ascii=False)}" for k, v in mapping.items()]
 
 
 def load_sweep(path: str | Path) -> tuple[SweepFile, list[Variant]]:
