@@ -424,7 +424,7 @@ class Campaign:
             again = self.cli(*dag.run_args(v), *(("--verify",) if damaged else ()))
             said = (again.stdout + again.stderr).splitlines()
             recomputed = {line.split(":")[0] for line in said if ": ran in " in line}
-            rec.quarantined += again.stdout.count("is damaged")
+            rec.quarantined += (again.stdout + again.stderr).count(" is damaged")
             if again.returncode != 0:
                 rec.problems.append(f"re-run rc={again.returncode}: {again.stderr[-800:]}")
                 continue
@@ -491,7 +491,7 @@ class Campaign:
                     break
                 time.sleep(0.005)
         elif kind == "efbig":
-            limit = round(math.exp(rng.uniform(math.log(64), math.log(200_000))))
+            limit = round(math.exp(rng.uniform(math.log(64), math.log(50_000))))
             rec.detail += f"; RLIMIT_FSIZE {limit} B"
 
             def preexec(limit: int = limit) -> None:
