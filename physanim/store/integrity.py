@@ -184,8 +184,8 @@ class StoreIntegrity:
                     "incomplete (complete=false): left by an interrupted or failed writer "
                     f"(metadata {meta})"
                 )
-            sealed = attrs.get(SEAL)  # (an output without a manifest is of the earlier format)
-            if sealed is not None and "manifest" in attrs and sealed != metadata_digest(document):
+            sealed = attrs.get(SEAL)  # (absent: an output of the earlier format)
+            if sealed is not None and sealed != metadata_digest(document):
                 return f"metadata {meta} does not match its checksum"
         except FileNotFoundError:
             return f"metadata {meta} is missing"
