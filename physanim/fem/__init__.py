@@ -1,9 +1,10 @@
 """Viscoelastic tetrahedral FEM dynamics (SPEC section 1, stage 7).
 
-Entry point: ``simulate(nodes, tets, materials, driven_idx, driven_traj, frame_dt, fixed_idx,
-params)`` -> ``SimResult``. Lower level: ``build_model`` (K, M, C from an element formulation,
-``elements``, and a constitutive law, ``laws``), ``Newmark``, ``CorotationalNewmark``,
-``solve_static``. ``simulate`` composes ``boundary`` (driven / fixed nodes, springs),
+Entry points: ``simulate_problem(problem, params)`` -> ``SimResult`` for a :class:`FemProblem`
+(mesh, per-tet materials, boundary conditions), or ``simulate(nodes, tets, materials,
+driven_idx, driven_traj, frame_dt, fixed_idx, params)`` from arrays. Lower level:
+``build_model`` (K, M, C from an element formulation, ``elements``, and a constitutive law,
+``laws``), ``Newmark``, ``CorotationalNewmark``, ``solve_static``. ``simulate`` composes ``boundary`` (driven / fixed nodes, springs),
 ``kinematics`` (linear / corotational), ``stepping`` (adaptive Newmark between frames) and
 ``monitors`` (energy, stress, inversion per frame).
 
@@ -24,15 +25,18 @@ DOFs, SPD, no spurious zero-energy modes); the deviatoric viscosity needs no ave
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel, build_model
 from physanim.fem.params import SimulateParams
-from physanim.fem.simulate import SimResult, simulate
+from physanim.fem.problem import FemProblem
+from physanim.fem.simulate import SimResult, simulate, simulate_problem
 from physanim.fem.stepping import SimulationDiverged
 
 __all__ = [
     "FemModel",
+    "FemProblem",
     "SimResult",
     "SimulateParams",
     "SimulationDiverged",
     "TetMaterials",
     "build_model",
     "simulate",
+    "simulate_problem",
 ]

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import fcntl
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -201,7 +201,7 @@ def preview(
     params: SimulateParams,
     settings: ReducedParams,
     cache_dir: Path,
-    progress: Any = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[SimResult, dict[str, Any]]:
     """The reduced run of ``problem`` (a material variant) and its summary: basis size and
     energy, the basis material's exact error, and with ``settings.estimate`` this variant's
