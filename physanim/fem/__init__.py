@@ -4,9 +4,10 @@ Entry points: ``simulate_problem(problem, params)`` -> ``SimResult`` for a :clas
 (mesh, per-tet materials, boundary conditions), or ``simulate(nodes, tets, materials,
 driven_idx, driven_traj, frame_dt, fixed_idx, params)`` from arrays. Lower level:
 ``build_model`` (K, M, C from an element formulation, ``elements``, and a constitutive law,
-``laws``), ``Newmark``, ``CorotationalNewmark``, ``solve_static``. ``simulate`` composes ``boundary`` (driven / fixed nodes, springs),
-``kinematics`` (linear / corotational), ``stepping`` (adaptive Newmark between frames) and
-``monitors`` (energy, stress, inversion per frame).
+``laws``), ``Newmark``, ``CorotationalNewmark``, ``solve_static``. ``simulate_problem``
+composes ``boundary`` (driven / fixed nodes, springs), ``kinematics`` (linear /
+corotational), ``stepping`` (adaptive Newmark between frames) and ``monitors`` (energy,
+stress, inversion per frame).
 
 Element formulations (``SimulateParams.formulation``), thick-walled cylinder under internal
 pressure (plane strain, quarter section, b/a = 2), computed / Lame inner displacement:
