@@ -266,12 +266,18 @@ def status(
     else:
         Console().print(_plan_table(entries))
         for e in entries:  # in full: the table's column may cut a long path short
-            where = store.root / e.stage / e.key
-            if e.damage:  # the damaged file's path, or the output's with the file in it
-                at = "" if str(where) in e.damage else f" ({where})"
-                print(f"damaged: {e.stage}/{e.key[:12]}{at}: {e.damage}")
+            if e.damage:
+                print(_damage_line(store, e.stage, e.key, e.damage))
         for meta in store.damaged_groups():
             print(f"damaged: group metadata {meta} is unreadable; `physanim verify` rewrites it")
+
+
+def _damage_line(store: StageStore, stage: str, key: str, problem: str) -> str:
+    """``damaged: stage/key (its path): problem``: the damaged file's path, or the output's
+    with the file named in ``problem``."""
+    where = store.root / stage / key
+    at = "" if str(where) in problem else f" ({where})"
+    return f"damaged: {stage}/{key[:12]}{at}: {problem}"
 
 
 @app.command()
@@ -302,9 +308,7 @@ def verify(target: Target) -> None:
             problem = store.damage(stage, key, checksums=True)
             if problem is not None:
                 damaged += 1
-                where = store.root / stage / key
-                at = "" if str(where) in problem else f" ({where})"
-                print(f"damaged: {stage}/{key[:12]}{at}: {problem}")
+                print(_damage_line(store, stage, key, problem))
     line = f"{checked} output(s) checked in {store.root}, {damaged} damaged"
     quarantined = [p for p in store.quarantined() if p.is_dir()]
     if quarantined:
