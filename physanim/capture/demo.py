@@ -1,5 +1,7 @@
 """The embedded demo dataset: a virtual actor (real face000 scan) performing a known
 expression sequence in front of a virtual RealSense-like RGB-D camera and a stereo pair.
+``DemoParams.performance`` picks the sequence from ``physanim.capture.library`` (default: the
+demo's jaw drop and asymmetric smile); ``DemoParams.markers`` paints the marker dots or not.
 
 Layout of the dataset directory (written to a temporary sibling, renamed at the end, so a
 crash never leaves a half dataset that looks complete)::
@@ -33,9 +35,10 @@ import zarr
 from physanim.capture.actor import build_actor
 from physanim.capture.bag_writer import RealSenseBagWriter
 from physanim.capture.camera_rig import CameraRig, realsense_like_rig, to_camera
+from physanim.capture.library import performance_setup
 from physanim.capture.markers import place_markers
 from physanim.capture.params import DemoParams
-from physanim.capture.performance import AnalyticFaceField, demo_performance
+from physanim.capture.performance import ExpressionModel
 from physanim.capture.synth_render import (
     SkinTexture,
     color_to_uint8,
@@ -155,7 +158,7 @@ class _Scene:
     v0: np.ndarray
     faces: np.ndarray
     m0: np.ndarray
-    field: AnalyticFaceField
+    field: ExpressionModel
     expression: np.ndarray
     head: np.ndarray
     rig: CameraRig
@@ -182,7 +185,8 @@ def _render_frame(scene: _Scene, t: int) -> _Frame:
     va = scene.v0 + scene.field.displacement(scene.v0, scene.expression[t])
     vw = va @ scene.head[t, :3, :3].T + scene.head[t, :3, 3]
     view_kw = dict(marker_radius=p.marker_radius_m, light_cam=LIGHT_CAM, supersample=p.supersample)
-    args = (scene.v0, scene.faces, rig.K, rig.size, scene.texture, scene.m0)
+    dots = scene.m0 if p.markers else None
+    args = (scene.v0, scene.faces, rig.K, rig.size, scene.texture, dots)
     left = render_view(to_camera(vw, rig.pose_left), *args, **view_kw)
     right = render_view(to_camera(vw, rig.pose_right), *args, with_depth=False, **view_kw)
     rng = np.random.default_rng([p.seed, t])
@@ -242,9 +246,9 @@ def _generate_into(
     v0, faces = actor.vertices, actor.faces
     markers = place_markers(v0, faces)
     m0 = markers.positions(v0, faces)
-    idx = {n: i for i, n in enumerate(markers.names)}
-    field = AnalyticFaceField(ch_left=tuple(m0[idx["ch_L"]]), ch_right=tuple(m0[idx["ch_R"]]))
-    perf = demo_performance(p.n_frames, p.fps, p.seed)
+    field, perf = performance_setup(
+        p.performance, dict(zip(markers.names, m0, strict=True)), p.n_frames, p.fps, p.seed
+    )
     head = perf.head_pose()
     rig = realsense_like_rig(distance_m=p.camera_distance_m, baseline_m=p.stereo_baseline_m)
     scene = _Scene(v0, faces, m0, field, perf.params, head, rig, SkinTexture.random(p.seed), p)
@@ -300,7 +304,8 @@ def _generate_into(
         {
             "marker_names": list(markers.names),
             "expression_names": list(field.param_names),
-            "expression_model": "AnalyticFaceField",
+            "expression_model": type(field).__name__,
+            "performance": p.performance,
             "expression_field": field.to_dict(),
             "head_center": perf.head_center.tolist(),
             "image_size": [h, w],

@@ -29,6 +29,19 @@ class DemoParams(BaseModel):
     color_noise: float = Field(1.5, ge=0.0, le=20.0, description="Colour noise std; 8-bit levels")
     marker_radius_m: float = Field(0.0016, gt=0, le=0.01, description="Painted dot radius; m")
     supersample: int = Field(2, ge=1, le=4, description="Colour supersampling per axis; count")
+    performance: str = Field(
+        "demo",
+        description="Which performance of physanim.capture.library the actor performs "
+        "('demo': jaw drop, then an asymmetric smile)",
+    )
+    markers: bool = Field(True, description="Paint the marker dots on the skin; bool")
+
+    @field_validator("performance")
+    @classmethod
+    def _known_performance(cls, v: str) -> str:
+        from physanim.capture.library import check_performance  # imports this module
+
+        return check_performance(v)
 
 
 class IngestParams(BaseModel):

@@ -81,7 +81,7 @@ def render_view(
     K: np.ndarray,
     size: tuple[int, int],
     texture: SkinTexture,
-    markers_neutral: np.ndarray,
+    markers_neutral: np.ndarray | None,
     *,
     marker_radius: float,
     light_cam: np.ndarray,
@@ -89,8 +89,9 @@ def render_view(
     with_depth: bool = True,
 ) -> View:
     """Render the deformed mesh ``vertices_cam`` (N, 3) m (camera frame) whose neutral
-    positions are ``neutral`` (N, 3) m; ``light_cam`` (3,) unit direction towards the light.
-    Without ``with_depth`` the view's depth and normal_dot_view are None."""
+    positions are ``neutral`` (N, 3) m; ``light_cam`` (3,) unit direction towards the light;
+    marker dots at neutral ``markers_neutral`` (K, 3) m (None: no dots). Without
+    ``with_depth`` the view's depth and normal_dot_view are None."""
     h, w = size
     s = supersample
     Ks = K.copy()
@@ -103,7 +104,9 @@ def render_view(
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     view_dir = -pos / np.linalg.norm(pos, axis=1, keepdims=True)
     nrm *= np.sign((nrm * view_dir).sum(axis=1))[:, None]  # face the camera
-    albedo = paint_markers(texture.albedo(mat), mat, markers_neutral, marker_radius)
+    albedo = texture.albedo(mat)
+    if markers_neutral is not None:
+        albedo = paint_markers(albedo, mat, markers_neutral, marker_radius)
     diffuse = np.clip(nrm @ light_cam, 0.0, None)[:, None]
     half = light_cam + view_dir
     half /= np.linalg.norm(half, axis=1, keepdims=True)
