@@ -432,8 +432,11 @@ def demo(
     out: Annotated[Path | None, typer.Option(help="directory (default data/demo)")] = None,
     force: Annotated[bool, typer.Option("--force", help="regenerate if present")] = False,
 ) -> None:
-    """Generate the demo dataset (virtual actor from a real scan, bag, RGBD, stereo, truth)."""
+    """Generate the demo dataset (virtual actor from a real scan, bag, RGBD, stereo, truth);
+    a performance library dataset's name (e.g. --set dataset.name=lips-s1-coarse) sets its
+    performance, seed, frames and markers."""
     from physanim.capture.demo import generate_demo
+    from physanim.capture.library import library_params
     from physanim.capture.params import DemoParams
 
     cfg = load(get_pipeline("face"), config, set_, None)
@@ -443,6 +446,7 @@ def demo(
         raise typer.Exit(0)
     with rich_progress(console) as progress:
         demo = cfg.section("demo", DemoParams)
+        demo = library_params(cfg.dataset.name, demo) or demo
         made = generate_demo(target, params=demo, progress=progress("demo dataset"))
     console.print(f"generated {made}")
 

@@ -101,21 +101,27 @@ def ensure_demo(
     progress: ProgressFactory | None = None,
     starting: Callable[[], None] | None = None,
 ) -> Path | None:
-    """Generate the demo dataset when the config names ``demo`` and it has no recording yet;
-    ``starting`` is called first (the CLI starts Prefect's server then, to come up meanwhile).
+    """Generate the demo dataset when the config names ``demo``, or a library dataset when
+    it names one (``physanim.capture.library.dataset_name``: ``lips-s1-coarse``, its
+    performance, seed, frames and markers from the name, the rest from the ``demo``
+    section), and it has no recording yet; ``starting`` is called first (the CLI starts
+    Prefect's server then, to come up meanwhile).
 
     Returns the generated directory, or None when nothing had to be done.
     """
     from physanim.capture.ingest import has_recording
+    from physanim.capture.library import library_params
+    from physanim.capture.params import DemoParams
 
     dataset = config.dataset
-    if dataset.name != "demo" or has_recording(dataset.path):
+    if has_recording(dataset.path):
+        return None
+    demo = library_params(dataset.name, config.section("demo", DemoParams))
+    if demo is None:
         return None
     from physanim.capture.demo import generate_demo  # open3d: only when generating
-    from physanim.capture.params import DemoParams
 
     if starting is not None:
         starting()
-    report = progress("demo dataset") if progress else None
-    demo = config.section("demo", DemoParams)
+    report = progress(f"{dataset.name} dataset") if progress else None
     return generate_demo(dataset.path, params=demo, progress=report)
