@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 import zarr
-from pydantic import ValidationError
+from pydantic import ValidationError, create_model
 from scipy.spatial.transform import Rotation
 
 from physanim.capture.demo import generate_demo
@@ -35,6 +35,8 @@ from physanim.capture.params import DemoParams
 from physanim.capture.performance import AnalyticFaceField, demo_performance
 from physanim.capture.raster import project
 from physanim.evaluate.truth import Truth, load_truth
+from physanim.pipeline import DatasetParams, PipelineConfig
+from tasks.ingest import ensure_demo
 
 
 @pytest.fixture(scope="module")
@@ -355,3 +357,20 @@ def test_a_coarse_library_dataset_holds_its_performance(tmp_path: Path) -> None:
     assert lift[peaks["frown"], k["brow_in_L"], 1] < -0.002
     assert lift[peaks["nose_wrinkle"], k["al_L"], 1] > 0.0015
     np.testing.assert_allclose(lift[[0, -1]], 0.0, atol=1e-6)
+
+
+def test_only_demo_and_library_names_are_generated_on_demand(
+    demo_dir: Path, tmp_path: Path
+) -> None:
+    config = create_model("Config", __base__=PipelineConfig, demo=(DemoParams, DemoParams()))
+
+    def at(name: str) -> PipelineConfig:
+        return config(dataset=DatasetParams(name=name, dir=str(tmp_path / name)))
+
+    assert ensure_demo(at("my-capture")) is None  # not a library name: ingest reports it
+    assert not (tmp_path / "my-capture").exists()
+    recorded = tmp_path / "lips-s2-coarse"
+    recorded.mkdir()
+    (recorded / "capture.bag").symlink_to(demo_dir / "capture.bag")
+    assert ensure_demo(at("lips-s2-coarse")) is None  # a recording is there: kept
+    assert sorted(p.name for p in recorded.iterdir()) == ["capture.bag"]
