@@ -20,6 +20,7 @@ from physanim.store import StageStore
 from physanim.store.stage_store import LATEST
 from tasks import (
     align,
+    dense,
     evaluate,
     fit,
     ingest,
@@ -62,6 +63,7 @@ FACE = Pipeline(
         fit.SPEC,
         scan.SPEC,
         align.SPEC,
+        dense.SPEC,
         tiles.SPEC,
         tetra.SPEC,
         materials.SPEC,

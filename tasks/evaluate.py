@@ -14,6 +14,7 @@ import numpy as np
 from physanim.evaluate.face import EvaluateParams, FaceEvaluation, FaceRun
 from physanim.pipeline import DatasetParams, StageContext, StageOutput, StageSpec
 from tasks.align import AlignOutput
+from tasks.dense import DenseOutput
 from tasks.materials import MaterialsOutput
 from tasks.simulate import SimulateOutput
 from tasks.tetra import TetraOutput
@@ -40,6 +41,7 @@ def fingerprint(dataset: DatasetParams, params: EvaluateParams) -> Mapping[str, 
 def face_run(
     track: TrackOutput,
     align: AlignOutput,
+    dense: DenseOutput,
     tetra: TetraOutput,
     materials: MaterialsOutput,
     simulate: SimulateOutput,
@@ -68,7 +70,7 @@ def face_run(
         mouth=align.mouth(),
         scan_vertices=align.scan_vertices,
         scan_side=align.scan_side,
-        kinematic=align.kinematic,
+        kinematic=dense.motion,
         times=simulate.times,
         fps=track.fps,
     )
@@ -78,6 +80,7 @@ def compute(
     params: EvaluateParams,
     track: TrackOutput,
     align: AlignOutput,
+    dense: DenseOutput,
     tetra: TetraOutput,
     materials: MaterialsOutput,
     simulate: SimulateOutput,
@@ -88,7 +91,7 @@ def compute(
     from physanim.evaluate.face import evaluate_face
     from physanim.evaluate.truth import load_truth
 
-    run = face_run(track, align, tetra, materials, simulate)
+    run = face_run(track, align, dense, tetra, materials, simulate)
     path = ctx.dataset_dir / params.truth
     truth = load_truth(path, run.displacements.shape[0]) if path.exists() else None
     evaluation, summary = evaluate_face(run, truth, params)
@@ -99,7 +102,7 @@ def compute(
 SPEC = StageSpec.typed(
     "evaluate",
     compute,
-    version="6",
+    version="7",
     doc="symmetry cost, mouth corners, lag, philtrum peaks; with truth: motion fidelity per "
     "region, lip gap, surface distance",
     fingerprint=fingerprint,

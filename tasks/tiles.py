@@ -14,12 +14,13 @@ import numpy as np
 from physanim.pipeline import StageContext, StageOutput, StageSpec
 from physanim.render.face_panel import FIT_TITLE, KINEMATIC_TITLE, TileParams
 from tasks.align import AlignOutput
+from tasks.dense import DenseOutput
 
 
 @dataclass(frozen=True)
 class TilesOutput(StageOutput):
     """R rendered frames: ``frames`` (R,) their indices, ``fit`` and ``kinematic`` (R, H, W,
-    3) uint8 RGB tiles of the fitted motion mesh and of the kinematic scan."""
+    3) uint8 RGB tiles of the fitted motion mesh and of the captured scan (stage ``dense``)."""
 
     frames: np.ndarray
     fit: np.ndarray
@@ -30,12 +31,14 @@ class TilesOutput(StageOutput):
         return {FIT_TITLE: self.fit, KINEMATIC_TITLE: self.kinematic}
 
 
-def compute(params: TileParams, align: AlignOutput, ctx: StageContext[TileParams]) -> TilesOutput:
-    """The fit and kinematic tiles at every ``params.every_frames``-th frame."""
+def compute(
+    params: TileParams, align: AlignOutput, dense: DenseOutput, ctx: StageContext[TileParams]
+) -> TilesOutput:
+    """The fit and captured-scan tiles at every ``params.every_frames``-th frame."""
     from physanim.render.face_panel import motion_tiles
 
     tiles = motion_tiles(
-        align.motion, align.triangles, align.kinematic, align.scan_vertices, align.scan_faces,
+        align.motion, align.triangles, dense.motion, align.scan_vertices, align.scan_faces,
         params, ctx.progress,
     )  # fmt: skip
     frames = params.frames(align.motion.shape[0])
@@ -45,7 +48,7 @@ def compute(params: TileParams, align: AlignOutput, ctx: StageContext[TileParams
 SPEC = StageSpec.typed(
     "tiles",
     compute,
-    version="1",
+    version="2",
     doc="panel tiles of the model fit and the kinematic scan (render's tile settings)",
     section="render",
 )

@@ -23,7 +23,7 @@ from physanim.mesh.seam import MouthLine
 from physanim.pipeline import ProgressFactory, ProgressFn
 
 #: Panel titles of the fit and kinematic-scan tiles (the capture's comes first, the FEM's last).
-FIT_TITLE, KINEMATIC_TITLE = "CANDIDE-style fit", "kinematic scan"
+FIT_TITLE, KINEMATIC_TITLE = "CANDIDE-style fit", "captured scan"
 
 
 class TileParams(BaseModel):

@@ -248,5 +248,5 @@ def capture_tables(evaluated: dict[str, Any], simulated: dict[str, Any]) -> dict
                  simulated.get("peak_to_p99_von_mises"), "", "<= 5"])  # fmt: skip
     rows.append(["fraction of the skin nodes the drive holds",
                  simulated.get("spring_node_fraction_of_skin"), "", "<= 0.25"])  # fmt: skip
-    header = ("measure", "FEM", "kinematic scan", "target")
+    header = ("measure", "FEM", "captured scan", "target")
     return {"Does the simulated face perform the capture?": (header, rows)}

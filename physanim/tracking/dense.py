@@ -1,0 +1,331 @@
+"""Dense capture: the motion of every vertex of the bound scan from each frame's colour and depth.
+
+Scene flow from optical flow plus depth, registered to the neutral frame so errors do not
+accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
+
+1. **Neutral view.** The scan (actor frame, N vertices) is posed by the landmark tracker's head
+   pose at frame 0 and projected; a vertex is *seen* where the measured depth agrees with its
+   own (``visible_tolerance_m``) and the surface faces the camera (``min_cos_view``). Its
+   neutral position is lifted from the measured depth, so a constant offset between the scan
+   and the measured surface cancels from the motion.
+2. **Flow.** OpenCV's DIS optical flow from the neutral colour frame to frame t, and back; the
+   vertex's pixel at t is its neutral pixel plus the flow. Where the backward flow does not
+   return it within ``max_flow_error_px`` (occlusion, the inside of the open mouth, flow
+   failure) the vertex is not observed at t.
+3. **Lift.** The depth at that pixel (Gaussian-smoothed with invalid pixels left out) gives
+   the camera-frame point; motion towards the camera (a pucker) comes from depth directly.
+4. **Head pose.** Re-estimated from the dense points with the landmark tracker's robust
+   weighted Kabsch (``physanim.tracking.tracks.head_poses``): points that ride rigidly with
+   the head over the sequence dominate, so an expression does not tilt the head.
+5. **Fill and smooth.** Per frame, the displacement field u minimises
+   ``sum_i c_i |u_i - u_obs_i|^2 + lam * sum_edges |u_i - u_j|^2`` over the (lip-cut) scan
+   graph, c_i = 1 where observed: observed motion is smoothed over ``smoothing_m`` and every
+   unobserved vertex is filled harmonically from its neighbours (the seam keeps the lips
+   apart). Observations farther than ``outlier_m`` from the smoothed field are dropped and
+   the field solved again. Then a Gaussian over time (``temporal_sigma_frames``).
+
+The confidence (T, N) is 1 where a vertex was observed and kept, 0 where it was filled: a
+filled vertex is marked, never silently guessed.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.ndimage import gaussian_filter1d, map_coordinates
+
+from physanim.mesh.topology import uniform_laplacian, vertex_normals
+from physanim.tracking.dense_params import DenseParams
+from physanim.tracking.lift import backproject
+from physanim.tracking.tracks import head_poses
+
+
+@dataclass(frozen=True)
+class DenseMotion:
+    """Dense capture of T frames of N scan vertices.
+
+    ``displacement`` (T, N, 3) float32 m in the actor (head) frame, relative to frame 0;
+    ``confidence`` (T, N) float32 in [0, 1], 0 where the vertex was filled from neighbours;
+    ``head_pose`` (T, 4, 4) camera <- actor, m; ``seen`` (N,) bool, seen in the neutral
+    frame; ``flow_error_px`` (T,) median forward-backward flow disagreement of the seen
+    vertices; ``seconds_per_frame`` wall time of the flow, lifting and filling per frame.
+    """
+
+    displacement: NDArray
+    confidence: NDArray
+    head_pose: NDArray
+    seen: NDArray
+    flow_error_px: NDArray
+    seconds_per_frame: float
+
+
+def smooth_depth(depth: NDArray, sigma_px: float) -> NDArray:
+    """Gaussian-smoothed depth (H, W) float32 m, invalid (NaN or <= 0) pixels left out
+    (normalised convolution); NaN where less than half the kernel's weight is valid."""
+    valid = np.isfinite(depth) & (depth > 0)
+    if sigma_px <= 0:
+        return np.where(valid, depth, np.nan).astype(np.float32)
+    num = cv2.GaussianBlur(np.where(valid, depth, 0.0).astype(np.float32), (0, 0), sigma_px)
+    den = cv2.GaussianBlur(valid.astype(np.float32), (0, 0), sigma_px)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = num / den
+    out[den < 0.5] = np.nan
+    return out
+
+
+def sample(image: NDArray, uv: NDArray) -> NDArray:
+    """Bilinear samples (P,) or (P, C) of ``image`` (H, W) or (H, W, C) at pixels ``uv``
+    (P, 2) (x, y); NaN outside the image or where a neighbouring pixel is NaN."""
+    coords = [uv[:, 1], uv[:, 0]]
+    if image.ndim == 2:
+        return map_coordinates(image, coords, order=1, mode="constant", cval=np.nan)
+    return np.stack([sample(image[..., c], uv) for c in range(image.shape[2])], axis=1)
+
+
+def _project(points: NDArray, K: NDArray) -> NDArray:
+    """Pixels (P, 2) of camera-frame points (P, 3) m."""
+    p = points @ K.T
+    return p[:, :2] / p[:, 2:3]
+
+
+def _transform(pose: NDArray, points: NDArray) -> NDArray:
+    return points @ pose[:3, :3].T + pose[:3, 3]
+
+
+def _flow_engine(params: DenseParams) -> cv2.DISOpticalFlow:
+    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    dis.setFinestScale(params.flow_finest_scale)
+    dis.setPatchSize(params.flow_patch_px)
+    dis.setPatchStride(min(params.flow_stride_px, params.flow_patch_px))
+    dis.setGradientDescentIterations(params.flow_iterations)
+    dis.setVariationalRefinementIterations(params.flow_refinement_iterations)
+    return dis
+
+
+@dataclass(frozen=True)
+class _NeutralView:
+    """Seen vertices' neutral pixels ``uv`` (S, 2), ``points`` (S, 3) m actor frame."""
+
+    seen: NDArray
+    uv: NDArray
+    points: NDArray
+
+
+def neutral_view(
+    vertices: NDArray, faces: NDArray, K: NDArray, pose: NDArray, depth: NDArray,
+    params: DenseParams,
+) -> _NeutralView:  # fmt: skip
+    """Which scan vertices (N, 3) m actor frame the neutral frame sees (camera <- actor
+    ``pose`` (4, 4), smoothed ``depth`` (H, W) m), their pixels and measured positions."""
+    cam = _transform(pose, vertices)
+    normals = vertex_normals(vertices, faces) @ pose[:3, :3].T
+    view = cam / np.linalg.norm(cam, axis=1, keepdims=True)
+    facing = -(normals * view).sum(axis=1) > params.min_cos_view
+    uv = _project(cam, K)
+    z = sample(depth, uv)
+    with np.errstate(invalid="ignore"):
+        seen = facing & (np.abs(z - cam[:, 2]) < params.visible_tolerance_m)
+    measured = backproject(uv[seen], z[seen], K)
+    inv = np.linalg.inv(pose)
+    return _NeutralView(seen, uv[seen], _transform(inv, measured))
+
+
+def _frame_points(
+    dis: cv2.DISOpticalFlow, gray0: NDArray, gray: NDArray, depth: NDArray, view: _NeutralView,
+    K: NDArray, params: DenseParams,
+) -> tuple[NDArray, NDArray]:  # fmt: skip
+    """Camera-frame points (S, 3) m of the seen vertices in one frame (NaN where not
+    observed) and their forward-backward flow disagreement (S,) px."""
+    forward = dis.calc(gray0, gray, None)
+    backward = dis.calc(gray, gray0, None)
+    uv = view.uv + sample(forward, view.uv)
+    back = uv + sample(backward, uv)
+    fb = np.linalg.norm(back - view.uv, axis=1)
+    z = sample(smooth_depth(depth, params.depth_sigma_px), uv)
+    points = backproject(uv, z, K)
+    with np.errstate(invalid="ignore"):
+        points[~(fb < params.max_flow_error_px)] = np.nan
+    return points, fb
+
+
+def _smoother(faces: NDArray, seen: NDArray, lam: float) -> Callable[[NDArray], NDArray]:
+    """``solve(b)`` for (S_seen + lam L) u = b on the scan graph, factorised once (CHOLMOD
+    when installed, else SuperLU); S_seen the 0/1 diagonal of the seen vertices, L the graph
+    Laplacian. b (N, k)."""
+    from physanim.fem.linsolve import factorize
+
+    n = len(seen)
+    A = uniform_laplacian(faces, n) * lam + sp.diags_array(seen.astype(np.float64))
+    # a tiny diagonal keeps pieces without any seen vertex (islands of the scan) regular
+    return factorize(sp.csc_matrix(A + sp.identity(n) * 1e-9 * lam))
+
+
+def _induced_laplacian(faces: NDArray, keep: NDArray) -> sp.csr_array:
+    """Graph Laplacian (K, K) of the scan graph restricted to the ``keep`` (N,) vertices."""
+    inside = faces[keep[faces].all(axis=1)]
+    renumber = np.cumsum(keep) - 1
+    return uniform_laplacian(renumber[inside], int(keep.sum()))
+
+
+def _harmonic_fill(laplacian: sp.csr_array, known: NDArray, values: NDArray) -> NDArray:
+    """``values`` (K, 3) with the entries not ``known`` (K,) replaced by the harmonic
+    extension of the known ones over the graph (0 on pieces without a known vertex)."""
+    unknown = ~known
+    out = np.where(known[:, None], values, 0.0)
+    if not unknown.any():
+        return out
+    from scipy.sparse.linalg import splu
+
+    A = laplacian[unknown][:, unknown] + sp.identity(int(unknown.sum())) * 1e-9
+    b = -(laplacian[unknown][:, known] @ values[known])
+    out[unknown] = splu(sp.csc_matrix(A)).solve(b)
+    return out
+
+
+def _edge_length(vertices: NDArray, faces: NDArray) -> float:
+    e = vertices[faces[:, [1, 2, 0]]] - vertices[faces]
+    return float(np.median(np.linalg.norm(e, axis=2)))
+
+
+@dataclass(frozen=True)
+class DenseObservations:
+    """What the frames show of the seen vertices (S of the scan's N): ``seen`` (N,) bool;
+    ``displacement`` (T, S, 3) m actor frame relative to frame 0, NaN where not observed;
+    ``flow_error_px`` (T, S) forward-backward flow disagreement; ``head_pose`` (T, 4, 4)
+    camera <- actor; ``seconds`` wall time."""
+
+    seen: NDArray
+    displacement: NDArray
+    flow_error_px: NDArray
+    head_pose: NDArray
+    seconds: float
+
+
+def observe(
+    color: NDArray,
+    depth: NDArray,
+    K: NDArray,
+    head_pose: NDArray,
+    vertices: NDArray,
+    faces: NDArray,
+    params: DenseParams,
+    progress: Callable[[int, int], None] | None = None,
+) -> DenseObservations:
+    """Flow, lifting and head pose (steps 1-4 of the module docstring) for the scan
+    ``vertices`` (N, 3) m actor frame, ``faces`` (F, 3), from ``color`` (T, H, W, 3) uint8
+    RGB and ``depth`` (T, H, W) m (NaN or 0 invalid; Zarr arrays are read a frame at a
+    time), intrinsics ``K`` (3, 3) px and the landmark tracker's ``head_pose`` (T, 4, 4)
+    camera <- actor. Frame 0 is the neutral."""
+    T = color.shape[0]
+    start = time.perf_counter()
+    gray0 = cv2.cvtColor(np.asarray(color[0]), cv2.COLOR_RGB2GRAY)
+    depth0 = smooth_depth(np.asarray(depth[0], dtype=np.float32), params.depth_sigma_px)
+    view = neutral_view(vertices, faces, K, head_pose[0], depth0, params)
+    if view.seen.sum() < 3:
+        raise ValueError(
+            "dense capture: the neutral frame sees fewer than 3 scan vertices; check the head "
+            "pose of frame 0 (stage track) and the depth of the recording"
+        )
+    workers = params.workers or len(os.sched_getaffinity(0))
+    local = threading.local()  # a DIS engine is not thread-safe: one per thread
+
+    def frame(t: int) -> tuple[NDArray, NDArray]:
+        gray = cv2.cvtColor(np.asarray(color[t]), cv2.COLOR_RGB2GRAY)
+        if not hasattr(local, "dis"):
+            local.dis = _flow_engine(params)
+        return _frame_points(
+            local.dis, gray0, gray, np.asarray(depth[t], dtype=np.float32), view, K, params
+        )
+
+    cam = np.full((T, len(view.uv), 3), np.nan)
+    fb = np.full((T, len(view.uv)), np.nan)
+    with ThreadPoolExecutor(workers) as pool:
+        for t, (points, err) in enumerate(pool.map(frame, range(T))):
+            cam[t], fb[t] = points, err
+            if progress is not None:
+                progress(t + 1, T)
+    poses = head_pose
+    if params.refine_head_pose:
+        observed = np.isfinite(cam).all(axis=2)
+        poses = head_poses(cam, observed.astype(np.float64), view.points)
+        lost = ~np.isfinite(poses[:, 0, 0])
+        poses[lost] = head_pose[lost]
+    inv = np.linalg.inv(poses)
+    actor = np.einsum("tij,tkj->tki", inv[:, :3, :3], cam) + inv[:, None, :3, 3]
+    return DenseObservations(
+        view.seen, actor - view.points[None], fb, poses, time.perf_counter() - start
+    )
+
+
+def fill_motion(
+    obs: DenseObservations,
+    vertices: NDArray,
+    faces: NDArray,
+    params: DenseParams,
+    prior: NDArray | None = None,
+) -> tuple[NDArray, NDArray]:
+    """Displacement (T, N, 3) float32 m and confidence (T, N) float32 of every scan vertex
+    from the observations (step 5 of the module docstring). With a ``prior`` (T, N, 3) m
+    (the kinematic scan's motion), the observed departure from it is filled instead of the
+    motion itself, so an unobserved vertex keeps the prior's motion plus its neighbours'
+    correction."""
+    T, n = obs.displacement.shape[0], len(vertices)
+    lam = max((params.smoothing_m / _edge_length(vertices, faces)) ** 2, 1e-3)
+    solve = _smoother(faces, obs.seen, lam)
+    seen_idx = np.flatnonzero(obs.seen)
+    seen_graph = _induced_laplacian(faces, obs.seen)
+    observed = np.isfinite(obs.displacement).all(axis=2).T  # (S, T)
+    base = np.zeros((T, n, 3)) if prior is None else np.asarray(prior, dtype=np.float64)
+    # the departure from the prior at the seen vertices, (S, T, 3)
+    measured = np.where(observed[..., None], obs.displacement.transpose(1, 0, 2), 0.0)
+    measured -= base[:, seen_idx].transpose(1, 0, 2)
+    keep = observed.copy()
+    for _ in range(params.fill_iterations):
+        # the seen vertices a frame does not observe (or observes as an outlier) get the
+        # harmonic extension of the kept ones, so the smoother's weights stay those of the
+        # seen vertices and one factorisation serves every frame
+        du = np.stack([_harmonic_fill(seen_graph, keep[:, t], measured[:, t]) for t in range(T)], 1)
+        rhs = np.zeros((n, T * 3))
+        rhs[seen_idx] = du.reshape(len(seen_idx), T * 3)
+        fit = solve(rhs).reshape(n, T, 3)
+        keep = observed & (np.linalg.norm(fit[seen_idx] - measured, axis=2) < params.outlier_m)
+    displacement = base + fit.transpose(1, 0, 2)
+    confidence = np.zeros((T, n), dtype=np.float32)
+    confidence[:, seen_idx] = keep.T
+    if params.temporal_sigma_frames > 0:
+        displacement = gaussian_filter1d(
+            displacement, params.temporal_sigma_frames, axis=0, mode="nearest"
+        )
+    return displacement.astype(np.float32), confidence
+
+
+def dense_track(
+    color: NDArray,
+    depth: NDArray,
+    K: NDArray,
+    head_pose: NDArray,
+    vertices: NDArray,
+    faces: NDArray,
+    params: DenseParams,
+    prior: NDArray | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> DenseMotion:
+    """Dense motion of the scan: :func:`observe` then :func:`fill_motion` (arguments there)."""
+    obs = observe(color, depth, K, head_pose, vertices, faces, params, progress)
+    start = time.perf_counter()
+    displacement, confidence = fill_motion(obs, vertices, faces, params, prior)
+    with np.errstate(invalid="ignore"):
+        flow_error = np.nanmedian(obs.flow_error_px, axis=1)
+    seconds = obs.seconds + time.perf_counter() - start
+    return DenseMotion(
+        displacement, confidence, obs.head_pose, obs.seen, flow_error, seconds / color.shape[0]
+    )

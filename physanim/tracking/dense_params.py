@@ -1,0 +1,76 @@
+"""Parameters of dense capture (stage ``dense``, ``physanim.tracking.dense``)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class DenseParams(BaseModel):
+    """Optical flow on colour + depth per frame -> motion of every scan vertex."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    method: Literal["dense", "kinematic"] = Field(
+        "dense",
+        description="captured motion of the scan: 'dense' (flow + depth of every frame) or "
+        "'kinematic' (the scan bound to the fitted face model, stage align)",
+    )
+    flow_finest_scale: int = Field(
+        0, ge=0, le=3, description="DIS flow: finest pyramid level (0 = full resolution); count"
+    )
+    flow_patch_px: int = Field(6, ge=4, le=32, description="DIS flow: patch side; px")
+    flow_stride_px: int = Field(2, ge=1, le=16, description="DIS flow: patch stride; px")
+    flow_iterations: int = Field(
+        16, ge=1, le=200, description="DIS flow: gradient-descent iterations per patch; count"
+    )
+    flow_refinement_iterations: int = Field(
+        5, ge=0, le=50, description="DIS flow: variational refinement iterations; count"
+    )
+    depth_sigma_px: float = Field(
+        1.5, ge=0.0, le=10.0, description="Gaussian smoothing of the depth before lifting; px"
+    )
+    visible_tolerance_m: float = Field(
+        0.004, gt=0.0, le=0.05,
+        description="a vertex is seen in the neutral frame when its depth is this close to "
+        "the measured depth; m",
+    )  # fmt: skip
+    min_cos_view: float = Field(
+        0.3, ge=0.0, lt=1.0, description="vertices seen more obliquely are not observed; 1"
+    )
+    max_flow_error_px: float = Field(
+        1.0, gt=0.0, le=20.0,
+        description="forward-backward flow disagreement above which a vertex is not "
+        "observed in that frame (occluded, inside the open mouth); px",
+    )  # fmt: skip
+    outlier_m: float = Field(
+        0.003, gt=0.0, le=0.05,
+        description="observed motion this far from its smoothed neighbourhood is rejected; m",
+    )  # fmt: skip
+    smoothing_m: float = Field(
+        0.002, ge=0.0, le=0.05,
+        description="length over which the motion is smoothed on the scan surface (gaps "
+        "are filled from their neighbours over any distance); m",
+    )  # fmt: skip
+    fill_iterations: int = Field(
+        2, ge=1, le=20,
+        description="fill passes: each smooths the kept observations and drops those "
+        "farther than outlier_m from the result; count",
+    )  # fmt: skip
+    prior: Literal["none", "kinematic"] = Field(
+        "kinematic",
+        description="what unobserved vertices follow: their neighbours' motion only, or the "
+        "kinematic scan's motion plus their neighbours' correction",
+    )
+    temporal_sigma_frames: float = Field(
+        1.0, ge=0.0, le=10.0, description="Gaussian smoothing of the motion over time; frames"
+    )
+    refine_head_pose: bool = Field(
+        True,
+        description="re-estimate the head pose from the dense points that ride rigidly "
+        "with the head (the landmark tracker's pose is the start); bool",
+    )
+    workers: int = Field(
+        0, ge=0, le=64, description="threads computing flow (0: one per core); count"
+    )

@@ -1,0 +1,84 @@
+"""Stage ``dense``: the captured motion of every scan vertex, from every frame's colour and depth.
+
+By default dense capture (``physanim.tracking.dense``: optical flow + depth, registered to the
+neutral frame, gaps filled from the neighbours over the kinematic scan's motion); with
+``dense.method: kinematic`` the kinematic scan of stage ``align`` (the scan bound to the fitted
+face model), as before dense capture existed. Either way its ``motion`` is what the report
+calls the captured scan. Version history: CHANGELOG.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from physanim.pipeline import StageContext, StageOutput, StageSpec
+from physanim.tracking.dense_params import DenseParams
+from tasks.align import AlignOutput
+from tasks.ingest import IngestOutput
+from tasks.track import TrackOutput
+
+
+@dataclass(frozen=True)
+class DenseOutput(StageOutput):
+    """The captured scan: T frames of the N scan vertices of stage ``align``.
+
+    ``motion`` (T, N, 3) float32 m, positions in the head (actor) frame (read lazily: a Zarr
+    array); ``confidence`` (T, N) float32 in [0, 1], 0 where a vertex was not observed and its
+    motion was filled from its neighbours (all 1 for the kinematic method); ``head_pose``
+    (T, 4, 4) camera <- actor, m (re-estimated from the dense points); ``flow_error_px`` (T,)
+    median forward-backward flow disagreement; ``method`` 'dense' or 'kinematic'.
+    """
+
+    motion: np.ndarray = field(metadata={"lazy": True})
+    confidence: np.ndarray
+    head_pose: np.ndarray
+    flow_error_px: np.ndarray
+    method: str
+
+
+def compute(
+    params: DenseParams,
+    ingest: IngestOutput,
+    track: TrackOutput,
+    align: AlignOutput,
+    ctx: StageContext[DenseParams],
+) -> DenseOutput:
+    """Dense capture of the aligned scan (or its kinematic motion, ``method: kinematic``)."""
+    kinematic = np.asarray(align.kinematic[...], dtype=np.float32)
+    T, n = kinematic.shape[:2]
+    if params.method == "kinematic":
+        return DenseOutput(
+            kinematic, np.ones((T, n), np.float32), track.head_pose, np.zeros(T), "kinematic",
+            summary={"method": "kinematic"},
+        )  # fmt: skip
+    from physanim.tracking.dense import dense_track
+
+    vertices = align.scan_vertices
+    prior = kinematic - vertices[None] if params.prior == "kinematic" else None
+    dense = dense_track(
+        ingest.color, ingest.depth, ingest.K, track.head_pose, vertices, align.scan_faces,
+        params, prior, ctx.progress("dense"),
+    )  # fmt: skip
+    observed = dense.confidence.mean(axis=1)
+    summary = dict(
+        method="dense",
+        seen_fraction=round(float(dense.seen.mean()), 4),
+        observed_fraction_min=round(float(observed.min()), 4),
+        observed_fraction_median=round(float(np.median(observed)), 4),
+        flow_error_px_median=round(float(np.nanmedian(dense.flow_error_px)), 3),
+        seconds_per_frame=round(dense.seconds_per_frame, 3),
+    )
+    motion = (vertices[None] + dense.displacement).astype(np.float32)
+    return DenseOutput(
+        motion, dense.confidence, dense.head_pose, dense.flow_error_px, "dense", summary=summary
+    )
+
+
+SPEC = StageSpec.typed(
+    "dense",
+    compute,
+    version="1",
+    doc="captured motion of every scan vertex: dense capture (flow + depth) or the kinematic scan",
+)

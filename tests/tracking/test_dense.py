@@ -1,0 +1,126 @@
+"""Dense capture recovers a known smooth warp of a real face photo (scikit-image's astronaut).
+
+The photo is laid on a gently curved surface 0.5 m in front of a pinhole camera; over 30 frames
+the surface moves by a known smooth field (up to 10 px sideways and 3 mm towards the camera),
+and the colour and depth frames are made by warping the photo and the depth with it. Dense
+capture of a grid mesh on the surface must recover every vertex's motion.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from physanim.tracking.dense import dense_track, smooth_depth
+from physanim.tracking.dense_params import DenseParams
+from physanim.tracking.lift import backproject
+
+skimage_data = pytest.importorskip("skimage.data")
+
+SIZE, T, F_PX = 256, 30, 500.0
+K = np.array([[F_PX, 0.0, SIZE / 2], [0.0, F_PX, SIZE / 2], [0.0, 0.0, 1.0]])
+
+
+def warp(uv: NDArray, t: int) -> tuple[NDArray, NDArray]:
+    """The true motion at frame t of surface points at neutral pixels ``uv`` (P, 2): pixel
+    shift (P, 2) px and depth change (P,) m (a smooth bump that grows and decays)."""
+    a = np.sin(np.pi * t / (T - 1)) ** 2
+    c = (uv - SIZE / 2) / SIZE
+    bump = np.exp(-(c**2).sum(axis=1) / 0.15)
+    shift = a * np.stack([10.0 * bump * np.cos(3 * c[:, 1]), -7.0 * bump + 3.0 * c[:, 0]], 1)
+    return shift, a * 0.003 * bump
+
+
+def neutral_depth(uv: NDArray) -> NDArray:
+    c = (uv - SIZE / 2) / SIZE
+    return 0.5 - 0.02 * np.exp(-(c**2).sum(axis=1) / 0.1)
+
+
+def render(photo: NDArray, t: int) -> tuple[NDArray, NDArray]:
+    """Colour (H, W, 3) and depth (H, W) m of frame t: the neutral pixel p0 of each output
+    pixel p solves p0 + shift(p0) = p (fixed-point iterations on the smooth field)."""
+    ys, xs = np.mgrid[0:SIZE, 0:SIZE].astype(np.float64)
+    p = np.stack([xs.ravel(), ys.ravel()], 1)
+    p0 = p.copy()
+    for _ in range(8):
+        p0 = p - warp(p0, t)[0]
+    dz = warp(p0, t)[1]
+    maps = p0.reshape(SIZE, SIZE, 2).astype(np.float32)
+    color = cv2.remap(photo, maps[..., 0], maps[..., 1], cv2.INTER_CUBIC)
+    depth = (neutral_depth(p0) + dz).reshape(SIZE, SIZE)
+    return color, depth.astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def recording() -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    photo = skimage_data.astronaut()[20:276, 130:386]  # the face
+    frames = [render(photo, t) for t in range(T)]
+    color = np.stack([f[0] for f in frames])
+    depth = np.stack([f[1] for f in frames])
+    # the grid mesh: every 4th pixel of the central 200 x 200 px, lifted at frame 0
+    g = np.arange(28, 228, 4, dtype=np.float64)
+    gx, gy = np.meshgrid(g, g)
+    uv0 = np.stack([gx.ravel(), gy.ravel()], 1)
+    n = len(g)
+    idx = np.arange(n * n).reshape(n, n)
+    quads = np.stack([idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]], -1).reshape(-1, 4)
+    # triangles oriented towards the camera (-z), as a scan's are
+    faces = np.concatenate([quads[:, [0, 2, 1]], quads[:, [0, 3, 2]]])
+    return color, depth, uv0, faces
+
+
+def test_dense_capture_recovers_a_known_warp_of_a_real_photo(recording):
+    color, depth, uv0, faces = recording
+    vertices = backproject(uv0, neutral_depth(uv0), K)
+    params = DenseParams(refine_head_pose=False, temporal_sigma_frames=0.0, smoothing_m=0.001)
+    pose = np.tile(np.eye(4), (T, 1, 1))
+    dense = dense_track(color, depth, K, pose, vertices, faces, params)
+    assert dense.seen.all()
+    px_err, mm_err = [], []
+    for t in range(T):
+        shift, dz = warp(uv0, t)
+        true = backproject(uv0 + shift, neutral_depth(uv0) + dz, K)
+        got = vertices + dense.displacement[t]
+        proj = got @ K.T
+        px_err.append(np.linalg.norm(proj[:, :2] / proj[:, 2:] - (uv0 + shift), axis=1))
+        mm_err.append(np.linalg.norm(got - true, axis=1) * 1e3)
+    px, mm = np.median(px_err), np.median(mm_err)
+    print(f"median error {px:.3f} px, {mm:.3f} mm over {T} frames")
+    assert px <= 1.0  # the issue's acceptance; measured about 0.1 px
+    assert mm <= 0.5
+    # the motion is recovered, not just small: at the peak the median true shift is > 3 px
+    assert np.median(np.linalg.norm(warp(uv0, T // 2)[0], axis=1)) > 3.0
+
+
+def test_unobserved_vertices_are_marked_and_filled_from_neighbours(recording):
+    """A hole in one frame's depth: its vertices get confidence 0, and the fill (the field is
+    smooth) still puts them within 1 mm of the truth (the motion there is ~10 mm)."""
+    color, depth, uv0, faces = recording
+    depth = depth.copy()
+    t = T // 2
+    depth[t, 100:140, 100:140] = np.nan
+    vertices = backproject(uv0, neutral_depth(uv0), K)
+    params = DenseParams(refine_head_pose=False, temporal_sigma_frames=0.0, prior="none")
+    dense = dense_track(color, depth, K, np.tile(np.eye(4), (T, 1, 1)), vertices, faces, params)
+    shift, dz = warp(uv0, t)
+    at = uv0 + shift  # where the vertices are in frame t
+    hole = ((at > 104) & (at < 136)).all(axis=1)
+    around = ((at > 96) & (at < 144)).all(axis=1)
+    assert hole.sum() > 20
+    assert not dense.confidence[t, hole].any()
+    assert dense.confidence[t, ~around].mean() > 0.9
+    true = backproject(uv0 + shift, neutral_depth(uv0) + dz, K)
+    err = np.linalg.norm(vertices + dense.displacement[t] - true, axis=1)
+    # a harmonic fill flattens the bump across the 30 mm hole: measured 0.56 mm of ~10 mm
+    assert np.median(err[hole]) < 1e-3
+
+
+def test_smooth_depth_ignores_invalid_pixels():
+    depth = np.full((20, 20), 0.5, np.float32)
+    depth[5:8, 5:8] = np.nan
+    depth[12, 12] = 0.0
+    out = smooth_depth(depth, 1.5)
+    assert np.allclose(out[np.isfinite(out)], 0.5, atol=1e-6)
+    assert np.isfinite(out[12, 12]) and np.isfinite(out[6, 6])  # filled from valid neighbours
