@@ -5,9 +5,11 @@ Entry points: ``simulate_problem(problem, params)`` -> ``SimResult`` for a :clas
 driven_idx, driven_traj, frame_dt, fixed_idx, params)`` from arrays. Lower level:
 ``build_model`` (K, M, C from an element formulation, ``elements``, and a constitutive law,
 ``laws``), ``Newmark``, ``CorotationalNewmark``, ``solve_static``. ``simulate_problem``
-composes ``boundary`` (driven / fixed nodes, springs), ``kinematics`` (linear /
-corotational), ``stepping`` (adaptive Newmark between frames) and ``monitors`` (energy,
-stress, inversion per frame).
+composes ``boundary`` (driven / fixed nodes, springs), ``actuation`` (active stress: a
+per-tet sigma_a added to the law's stress, its nodal forces -sum_e V_e B_e^T sigma_a,e
+interpolated between frames like the driven motion), ``kinematics`` (linear / corotational),
+``stepping`` (adaptive Newmark between frames) and ``monitors`` (energy, stress, inversion per
+frame).
 
 Element formulations (``SimulateParams.formulation``), thick-walled cylinder under internal
 pressure (plane strain, quarter section, b/a = 2), computed / Lame inner displacement:

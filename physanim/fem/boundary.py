@@ -81,26 +81,27 @@ def _node_index(name: str, idx: NDArray | None, n_nodes: int) -> NDArray:
 
 
 @dataclass(frozen=True)
-class SpringForce:
-    """Spring forces k_i u_i(t) (N), interpolated between frames like the prescribed motion."""
+class FrameForce:
+    """Nodal forces given at the capture frames on some DOFs, N, interpolated between frames
+    like the prescribed motion (Catmull-Rom): spring pulls k_i u_i(t), active forces.
 
-    springs: SpringDrive
-    positions: NDArray  # (3S,) positions of the spring DOFs among the free DOFs
-    dofs: NDArray  # (3S,) spring DOFs
+    ``values`` (T, K) N on ``dofs`` (K,), which sit at ``positions`` (K,) among the
+    ``n_free`` free DOFs; frames ``frame_dt`` s apart."""
+
+    values: NDArray
+    dofs: NDArray
+    positions: NDArray
     frame_dt: float
     n_free: int
 
     @cached_property
-    def _forces(self) -> tuple[NDArray, NDArray]:
-        """Forces k_i u_i (T, 3S) N at the frames and their Catmull-Rom tangents, N/s."""
-        targets = self.springs.targets.reshape(len(self.springs.targets), -1)
-        forces = targets * np.repeat(self.springs.stiffness, 3)
-        return forces, tangents(forces, self.frame_dt)
+    def _tangents(self) -> NDArray:
+        """Catmull-Rom tangents (T, K) of the frame forces, N/s."""
+        return tangents(self.values, self.frame_dt)
 
     def at(self, times: NDArray) -> NDArray:
-        """(len(times), 3S) forces on the spring DOFs, N."""
-        forces, tang = self._forces
-        return catmull_rom(forces, self.frame_dt, times, tang)[0]
+        """(len(times), K) forces on ``dofs``, N."""
+        return catmull_rom(self.values, self.frame_dt, times, self._tangents)[0]
 
     def free(self, times: NDArray) -> NDArray:
         """(len(times), n_free) forces on the free DOFs, N."""
@@ -113,6 +114,22 @@ class SpringForce:
         out = np.zeros(n_dofs)
         out[self.dofs] = self.at(np.array([time]))[0]
         return out
+
+    def __add__(self, other: FrameForce) -> FrameForce:
+        """Both forces on the union of their DOFs (same frames and free DOFs)."""
+        if (other.frame_dt, other.n_free, len(other.values)) != (
+            self.frame_dt,
+            self.n_free,
+            len(self.values),
+        ):
+            raise ValueError("forces to add must share frame times and free DOFs")
+        dofs, at = np.unique(np.r_[self.dofs, other.dofs], return_inverse=True)
+        values = np.zeros((len(self.values), len(dofs)))
+        values[:, at[: len(self.dofs)]] += self.values  # each force's DOFs are distinct
+        values[:, at[len(self.dofs) :]] += other.values
+        positions = np.zeros(len(dofs), dtype=np.int64)
+        positions[at] = np.r_[self.positions, other.positions]
+        return FrameForce(values, dofs, positions, self.frame_dt, self.n_free)
 
 
 @dataclass(frozen=True)
@@ -202,14 +219,14 @@ class BoundaryConditions:
             split = ((split[0] + k_springs).tocsr(), split[1], split[2])
         return (K + k_springs).tocsr(), split
 
-    def spring_force(self, free: NDArray) -> SpringForce | None:
-        """The springs' forces over the ``free`` (n_u,) DOFs, or None without springs."""
+    def spring_force(self, free: NDArray) -> FrameForce | None:
+        """The springs' forces k_i u_i(t) over the ``free`` (n_u,) DOFs, or None without
+        springs."""
         if self.springs is None:
             return None
-        dofs = self.springs.dofs()
-        return SpringForce(
-            self.springs, np.searchsorted(free, dofs), dofs, self.frame_dt, len(free)
-        )
+        s, dofs = self.springs, self.springs.dofs()
+        forces = s.targets.reshape(len(s.targets), -1) * np.repeat(s.stiffness, 3)
+        return FrameForce(forces, dofs, np.searchsorted(free, dofs), self.frame_dt, len(free))
 
     def drive_energy(self, K: sp.csr_matrix) -> float:
         """Energy scale of the drive, J: the largest 0.5 sum_i K_ii u_i^2 of a frame's

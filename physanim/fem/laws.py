@@ -8,7 +8,8 @@ e.g. ``beta_s``). It has two methods: ``moduli`` (the isotropic linear elastic p
 bulk modulus per tet) and ``viscosity`` (the viscous Voigt matrix C' per tet, stress = C'
 strain rate). The
 element formulation (:mod:`physanim.fem.elements`) decides how the volumetric part is
-assembled.
+assembled. An active stress (muscle-like actuation, :mod:`physanim.fem.actuation`) adds to
+the law's: total stress = elastic + viscous + active.
 
 A new law is one subclass with a ``name`` literal, decorated with :func:`register_law`; a config
 then selects it by that name, and ``build_model`` uses it. Voigt strain order (xx, yy, zz,

@@ -99,13 +99,15 @@ def basis_key(
     """Content key of a basis: code version, mesh, conditions, region labels, basis material,
     full-run settings (the :class:`SimulateParams` fields of ``params``) and the reduced
     settings that shape the basis."""
-    bc = problem.conditions
+    bc, act = problem.conditions, problem.actuation
     springs = bc.springs
     spring_parts = () if springs is None else (springs.nodes, springs.stiffness, springs.targets)
+    active = () if act is None else (act.basis.centres, act.basis.radius, act.coefficients)
     shaping = settings.model_dump(mode="json", exclude={"enabled", "estimate"})
     return content_digest(
         BASIS_VERSION, problem.nodes, problem.tets, bc.driven_idx, bc.fixed_idx, bc.values,
-        bc.frame_dt, *spring_parts, np.asarray(tet_labels), settings.basis_material.model_dump(),
+        bc.frame_dt, *spring_parts, *active, np.asarray(tet_labels),
+        settings.basis_material.model_dump(),
         params.model_dump(mode="json", include=set(SimulateParams.model_fields)), shaping,
     )  # fmt: skip
 
@@ -142,7 +144,9 @@ def build_basis(
         )  # fmt: skip
     free = free_dofs(model.n_dofs, bc.prescribed_dofs)
     basis = reduced.pod_basis(run.displacements, free, settings.energy, settings.max_modes, extra)
-    own = reduced.simulate_reduced(model, bc, basis, run.frame_substeps)
+    own = reduced.simulate_reduced(
+        model, bc, basis, run.frame_substeps, actuation=problem.actuation
+    )
     error = reduced.displacement_error(own.result.displacements, run.displacements)
     return {
         "phi": basis.phi,
@@ -211,7 +215,9 @@ def preview(
     model = build_model(problem.nodes, problem.tets, problem.materials, params)
     t_asm = time.perf_counter() - t0
     bc = problem.conditions
-    run = reduced.simulate_reduced(model, bc, found.basis, found.substeps, progress=progress)
+    run = reduced.simulate_reduced(
+        model, bc, found.basis, found.substeps, progress, problem.actuation
+    )
     result = run.result
     summary: dict[str, Any] = {
         "modes": found.basis.size,
@@ -225,7 +231,9 @@ def preview(
     seconds = {"basis": found.seconds, "assembly": t_asm, **result.timings}
     if settings.estimate:
         t0 = time.perf_counter()
-        est = reduced.residual_estimate(model, bc, found.basis, run, params.solver)
+        est = reduced.residual_estimate(
+            model, bc, found.basis, run, params.solver, problem.actuation
+        )
         seconds["estimate"] = time.perf_counter() - t0
         # |(u + e) - u| against u: the estimated error relative to the preview's own size
         pair = (result.displacements + est, result.displacements)

@@ -25,13 +25,15 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from physanim.fem.boundary import BoundaryConditions, SpringForce
+from physanim.fem.actuation import Actuation
+from physanim.fem.boundary import BoundaryConditions, FrameForce
 from physanim.fem.linsolve import factorize
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel
 from physanim.fem.monitors import InversionMonitor, StressMonitor
 from physanim.fem.newmark import State
 from physanim.fem.numba_threads import faster_thread_count, keeps_thread_count
+from physanim.fem.problem import applied_load
 from physanim.fem.simulate import SimResult
 from physanim.fem.statics import free_dofs
 
@@ -151,10 +153,11 @@ def simulate_reduced(
     basis: PodBasis,
     substeps: NDArray,
     progress: Callable[[int, int], None] | None = None,
+    actuation: Actuation | None = None,
 ) -> ReducedRun:
-    """The run of ``model`` under ``bc`` in the coordinates of ``basis``, with ``substeps``
-    (T,) Newmark substeps leading to each frame (entry 0 unused; e.g. the basis run's
-    ``frame_substeps``, so that the time discretisation is the same).
+    """The run of ``model`` under ``bc`` (and ``actuation``, if any) in the coordinates of
+    ``basis``, with ``substeps`` (T,) Newmark substeps leading to each frame (entry 0 unused;
+    e.g. the basis run's ``frame_substeps``, so that the time discretisation is the same).
 
     The first frame is the reduced static equilibrium. The run's :class:`SimResult` holds what
     the full run reports (displacements reconstructed on every node, energies, stresses and
@@ -177,8 +180,8 @@ def simulate_reduced(
     moving = np.flatnonzero(np.any(bc.values != 0, axis=0))
     moving = moving[moving < n_driven]
     red = project(stiffness, model.M, model.C, basis, pres, moving)
-    force = bc.spring_force(free)
-    phi_springs = None if force is None else basis.phi[force.positions]
+    force = applied_load(bc, actuation, model, free)
+    phi_force = None if force is None else basis.phi[force.positions]
     t_proj = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -189,7 +192,7 @@ def simulate_reduced(
     first = np.r_[0, np.cumsum(substeps[1:])[:-1]]  # index of each frame's first step
     times = (frame - 1) * frame_dt + h * (np.arange(len(frame)) - first[frame - 1] + 1)
     d_m, v_m, a_m = (x[:, moving] for x in bc.prescribed(np.r_[0.0, times]))
-    load = _spring_load(force, phi_springs, np.r_[0.0, times])
+    load = _projected_load(force, phi_force, np.r_[0.0, times])
     load -= d_m @ red.bk.T + v_m @ red.bc.T + a_m @ red.bm.T  # (S + 1, r), N
     q = _cholesky(red.k)(load[0] + red.bc @ v_m[0] + red.bm @ a_m[0])  # static: K q = f
     qd = np.zeros(basis.size)
@@ -224,8 +227,9 @@ def simulate_reduced(
 
     t0 = time.perf_counter()
     k_el = red.k
-    if force is not None and phi_springs is not None:  # strain energy: the tissue's alone
-        k_el = red.k - (phi_springs.T * np.repeat(force.springs.stiffness, 3)) @ phi_springs
+    if bc.springs is not None:  # strain energy: the tissue's alone
+        phi_springs = basis.phi[np.searchsorted(free, bc.springs.dofs())]
+        k_el = red.k - (phi_springs.T * np.repeat(bc.springs.stiffness, 3)) @ phi_springs
     out, kinetic, strain, stress, inversion = _monitored(model, bc, red, k_el, (qs, qds))
     t_mon = time.perf_counter() - t0
     most = int(substeps[1:].max(initial=1))
@@ -248,11 +252,11 @@ def simulate_reduced(
     return ReducedRun(result, qs, qds, qdds)
 
 
-def _spring_load(force: SpringForce | None, phi_springs: NDArray | None, times: NDArray):
-    """(len(times), r) projected spring forces Phi^T f_u(t), N."""
-    if force is None or phi_springs is None:
+def _projected_load(force: FrameForce | None, phi_force: NDArray | None, times: NDArray):
+    """(len(times), r) projected applied forces Phi^T f_u(t) (springs, actuation), N."""
+    if force is None or phi_force is None:
         return 0.0 * times[:, None]
-    return force.at(times) @ phi_springs
+    return force.at(times) @ phi_force
 
 
 def _monitored(
@@ -376,11 +380,13 @@ def residual_estimate(
     basis: PodBasis,
     run: ReducedRun,
     solver: str = "auto",
+    actuation: Actuation | None = None,
 ) -> NDArray:
     """Estimated error (T, N, 3) m of a reduced run, without the full run: K_uu^-1 r_u in
     every frame, r_u = f_u - (M a + C v + K d)_u the full model's residual of the reduced
-    trajectory (K with the springs). The error e obeys M e'' + C e' + K e = r exactly; the
-    estimate leaves out inertia and viscosity of e itself (the tissue is strongly damped).
+    trajectory (K with the springs, f_u the springs' and the ``actuation``'s forces). The
+    error e obeys M e'' + C e' + K e = r exactly; the estimate leaves out inertia and
+    viscosity of e itself (the tissue is strongly damped).
     One factorisation of K_uu."""
     stiffness, _ = bc.with_springs(model.K, None)
     pres, free = bc.prescribed_dofs, basis.free
@@ -393,7 +399,7 @@ def residual_estimate(
         full.append(x)
     rows = lambda a: sp.csr_matrix(a)[free]  # noqa: E731
     r = -(rows(stiffness) @ full[0].T + rows(model.C) @ full[1].T + rows(model.M) @ full[2].T)
-    force = bc.spring_force(free)
+    force = applied_load(bc, actuation, model, free)
     if force is not None:
         r[force.positions] += force.at(times).T
     solve = factorize(sp.csr_matrix(stiffness)[free][:, free].tocsc(), solver)

@@ -120,8 +120,8 @@ def simulate_problem(
     model: FemModel | None = None,
 ) -> SimResult:
     """Solve ``problem`` at its frame times. The first frame is the static equilibrium for
-    the first prescribed displacements and the springs' first targets. ``model`` may pass a
-    prebuilt ``build_model`` result (e.g. another element formulation:
+    the first prescribed displacements, the springs' first targets and the first actuation.
+    ``model`` may pass a prebuilt ``build_model`` result (e.g. another element formulation:
     ``build_model(..., element=...)``); by default the model is ``params``' law and element.
 
     On cores busy with other processes one thread can beat all of numba's: the run uses the
@@ -136,6 +136,8 @@ def simulate_problem(
     kin = kinematics(model, params)
     if bc.springs is not None and not kin.springs:
         raise ValueError("springs are not supported with the corotational option")
+    if problem.actuation is not None and not kin.springs:
+        raise ValueError("actuation is not supported with the corotational option")
     levels = substep_levels(frame_dt, params, kin.adaptive)
     n_frames, pres = bc.n_frames, bc.prescribed_dofs
 
@@ -148,7 +150,7 @@ def simulate_problem(
         integ = kin.integrator(stiffness, split, frame_dt / levels[0], pres)
     integrators = IntegratorCache(integ, levels[0], frame_dt, params.factor_cache)
     t_fac = time.perf_counter() - t0
-    force = bc.spring_force(integ.free)
+    force = problem.load(model, integ.free)
     stepper = FrameStepper(
         integrators, levels, bc, force, params.error_tol_mm * 1e-3, params.error_estimate
     )
@@ -157,7 +159,7 @@ def simulate_problem(
 
     out = np.zeros((n_frames, n_nodes, 3), dtype=np.float32)
     energy = EnergyMonitor(
-        model, kin, n_frames, bc.drive_energy(model.K), params.energy_blowup_factor
+        model, kin, n_frames, problem.drive_energy(model), params.energy_blowup_factor
     )
     monitors = (energy, StressMonitor(model, n_frames), InversionMonitor(model, n_frames))
 

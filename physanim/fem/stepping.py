@@ -38,7 +38,7 @@ from collections import OrderedDict
 import numpy as np
 import scipy.sparse as sp
 
-from physanim.fem.boundary import BoundaryConditions, SpringForce
+from physanim.fem.boundary import BoundaryConditions, FrameForce
 from physanim.fem.newmark import Newmark, State
 from physanim.fem.params import SimulateParams
 from physanim.fem.statics import solve_static
@@ -61,12 +61,13 @@ def initial_state(
     integ: Newmark,
     stiffness: sp.csr_matrix,
     bc: BoundaryConditions,
-    force: SpringForce | None,
+    force: FrameForce | None,
     solver: str,
 ) -> State:
     """The state at frame 0: static equilibrium (``stiffness`` (n, n) N/m) for the first
-    prescribed displacements and spring forces, the prescribed velocity and acceleration,
-    and the free DOFs' acceleration from the equation of motion when anything moves."""
+    prescribed displacements and applied forces (springs, actuation), the prescribed velocity
+    and acceleration, and the free DOFs' acceleration from the equation of motion when
+    anything moves."""
     n_dofs, pres = stiffness.shape[0], bc.prescribed_dofs
     state = State.rest(n_dofs)
     d_c, v_c, a_c = (x[0] for x in bc.prescribed(np.zeros(1)))
@@ -104,17 +105,17 @@ class IntegratorCache:
 
 class FrameStepper:
     """Advances a :class:`State` from frame k - 1 to frame k under boundary conditions ``bc``
-    and optional spring ``force``. ``estimate``: 'acceleration' or 'doubling' (module
-    docstring). Counts per run: ``substeps`` (T,) substeps that led to each frame,
-    ``check_steps`` (steps computed and discarded), ``over`` (frames whose error stayed above
-    the tolerance at the smallest step allowed)."""
+    and optional applied ``force`` (springs, actuation). ``estimate``: 'acceleration' or
+    'doubling' (module docstring). Counts per run: ``substeps`` (T,) substeps that led to each
+    frame, ``check_steps`` (steps computed and discarded), ``over`` (frames whose error stayed
+    above the tolerance at the smallest step allowed)."""
 
     def __init__(
         self,
         integrators: IntegratorCache,
         levels: list[int],
         bc: BoundaryConditions,
-        force: SpringForce | None,
+        force: FrameForce | None,
         error_tol_m: float,
         estimate: str = "acceleration",
     ) -> None:
@@ -138,7 +139,7 @@ class FrameStepper:
 
     def _drive(self, k: int, n_sub: int) -> tuple[np.ndarray, ...]:
         """The times (n_sub,) s of the substeps from frame k - 1 to frame k, the prescribed
-        d, v, a (n_sub, n_c) and spring forces (n_sub, n_free) or None at them."""
+        d, v, a (n_sub, n_c) and applied forces (n_sub, n_free) or None at them."""
         h = self.bc.frame_dt / n_sub
         times = (k - 1) * self.bc.frame_dt + h * np.arange(1, n_sub + 1)
         dd, vv, aa = self.bc.prescribed(times)

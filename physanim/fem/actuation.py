@@ -1,0 +1,195 @@
+"""Active stress: the FEM's actuation, muscle-like stresses in the tissue.
+
+Physics (small strain). The total Cauchy stress of a tet is
+
+    sigma = C eps + C' eps_dot + sigma_a,
+
+elastic and viscous (the law, :mod:`physanim.fem.laws`) plus an active stress sigma_a, a Voigt
+6-vector (xx, yy, zz, yz, xz, xy; tensor components, not doubled) in Pa, prescribed in time
+and independent of the material. Virtual work over the element's strain B_e d puts it on the
+right-hand side as the nodal force
+
+    f_a = -sum_e V_e B_e^T sigma_a,e   (N),   M d'' + C d' + K d = f + f_a.
+
+Sign convention: a positive (tensile) active stress along a direction contracts the tissue
+along it; an unloaded body settles where the total stress vanishes, at the strain
+eps = -C^{-1} sigma_a (uniform for a uniform sigma_a). Both element formulations
+(:mod:`physanim.fem.elements`) pass that patch test: the averaged nodal pressure of 'anp'
+equals the tets' own volumetric strain under a uniform strain. Because it is a stress, not an
+active strain, the same actuation strains a softer tissue more (eps ~ 1/E) and reaches a
+more viscous one later (Kelvin-Voigt relaxation time eta / mu): material edits act on it.
+
+Actuation fields (:class:`StressBasis`): P smooth spatial patches over the tissue (a
+partition of unity, each patch's weight falling as (1 - (d/r)^2)^2 from its centre) times the
+5 orthonormal deviatoric stress directions. The volumetric part of an active stress is left
+out: nearly incompressible tissue balances it by its pressure (kappa / mu = 100 at nu =
+0.495, so it moves the tissue about a hundred times less). :class:`Actuation` holds the
+coefficients (Pa) per capture frame, interpolated between frames like the driven motion.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from physanim.fem.assembly import strain_displacement
+from physanim.fem.boundary import FrameForce, patch_weights
+from physanim.fem.geometry import element_dofs
+from physanim.fem.model import FemModel
+
+_S2, _S6 = np.sqrt(2.0), np.sqrt(6.0)
+#: (5, 6) orthonormal deviatoric stress directions in Voigt order (unit Frobenius norm of the
+#: tensor): the two normal differences, then the shears yz, xz, xy
+DEVIATORIC = np.array(
+    [
+        [2 / _S6, -1 / _S6, -1 / _S6, 0, 0, 0],
+        [0, 1 / _S2, -1 / _S2, 0, 0, 0],
+        [0, 0, 0, 1 / _S2, 0, 0],
+        [0, 0, 0, 0, 1 / _S2, 0],
+        [0, 0, 0, 0, 0, 1 / _S2],
+    ]
+)
+#: a patch reaches this many times the centres' spacing (every tet lies in several patches)
+RADIUS_PER_SPACING = 2.0
+
+
+def stress_force_operator(
+    grads: NDArray, volumes: NDArray, tets: NDArray, n_nodes: int
+) -> sp.csr_matrix:
+    """D (3N, 6M) with D @ s = sum_e V_e B_e^T s_e, the nodal forces (N) that balance per-tet
+    stresses s (M, 6) Pa raveled; the active force is f_a = -D @ sigma_a.ravel().
+
+    grads (M, 4, 3) 1/m shape gradients, volumes (M,) m^3, tets (M, 4)."""
+    m = len(tets)
+    B = strain_displacement(grads) * volumes[:, None, None]  # (M, 6, 12)
+    rows = np.broadcast_to(element_dofs(tets)[:, None, :], B.shape)
+    cols = np.broadcast_to(6 * np.arange(m)[:, None, None] + np.arange(6)[:, None], B.shape)
+    shape = (3 * n_nodes, 6 * m)
+    return sp.csr_matrix((B.ravel(), (rows.ravel(), cols.ravel())), shape=shape)
+
+
+def model_force_operator(model: FemModel) -> sp.csr_matrix:
+    """:func:`stress_force_operator` of an assembled model."""
+    return stress_force_operator(model.grads, model.volumes, model.tets, len(model.nodes))
+
+
+def covering_centres(points: NDArray, spacing: float) -> NDArray:
+    """Indices (P,) of patch centres among ``points`` (M, 3) m by farthest-point sampling,
+    from the point nearest their mean, until every point lies within ``spacing`` m of one."""
+    p = np.asarray(points, dtype=np.float64)
+    first = int(np.argmin(np.linalg.norm(p - p.mean(axis=0), axis=1)))
+    chosen, dist = [first], np.linalg.norm(p - p[first], axis=1)
+    while dist.max() > spacing:
+        nxt = int(dist.argmax())
+        chosen.append(nxt)
+        dist = np.minimum(dist, np.linalg.norm(p - p[nxt], axis=1))
+    return np.asarray(chosen, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class StressBasis:
+    """Active stress fields over M tets spanned by P patches x the 5 ``DEVIATORIC``
+    directions: sigma_a (M, 6) = weights @ (c @ DEVIATORIC) for coefficients c (P, 5) Pa.
+
+    ``weights`` (M, P) CSR, a partition of unity (rows sum to 1); ``centres`` (P, 3) m;
+    ``radius`` m, the reach of each patch."""
+
+    weights: sp.csr_matrix
+    centres: NDArray
+    radius: float
+
+    @classmethod
+    def patches(cls, nodes: NDArray, tets: NDArray, centres: NDArray, radius: float) -> StressBasis:
+        """Patches of ``radius`` m around ``centres`` (P, 3) m over the tets' centroids;
+        ValueError when a tet lies in no patch."""
+        points = np.asarray(nodes, dtype=np.float64)[np.asarray(tets)].mean(axis=1)
+        centres = np.asarray(centres, dtype=np.float64)
+        near = cKDTree(centres).sparse_distance_matrix(
+            cKDTree(points), radius, output_type="ndarray"
+        )
+        w = patch_weights(near["v"], radius)
+        weights = sp.csr_matrix((w, (near["j"], near["i"])), shape=(len(points), len(centres)))
+        total = np.asarray(weights.sum(axis=1)).ravel()
+        if np.any(total <= 0):
+            raise ValueError(
+                f"{int((total <= 0).sum())} tets lie in no patch: radius {radius} m is too "
+                "small for these centres"
+            )
+        return cls(sp.diags(1.0 / total) @ weights, centres, float(radius))
+
+    @classmethod
+    def covering(cls, nodes: NDArray, tets: NDArray, spacing: float) -> StressBasis:
+        """Patches centred on tet centroids at most ``spacing`` m from every centroid
+        (:func:`covering_centres`), each reaching ``RADIUS_PER_SPACING`` times that."""
+        points = np.asarray(nodes, dtype=np.float64)[np.asarray(tets)].mean(axis=1)
+        centres = points[covering_centres(points, spacing)]
+        return cls.patches(nodes, tets, centres, RADIUS_PER_SPACING * spacing)
+
+    @property
+    def n_patches(self) -> int:
+        return len(self.centres)
+
+    @property
+    def size(self) -> int:
+        """Number of coefficients, 5 P."""
+        return len(DEVIATORIC) * self.n_patches
+
+    def stress(self, coefficients: NDArray) -> NDArray:
+        """Per-tet active stress (M, 6) Pa of coefficients (P, 5) Pa."""
+        return self.weights @ (np.asarray(coefficients) @ DEVIATORIC)
+
+    def force_matrix(self, operator: sp.csr_matrix) -> sp.csc_matrix:
+        """(3N, 5P) active nodal forces, N per Pa of each coefficient (patch-major), from
+        the ``stress_force_operator`` of the mesh."""
+        phi = sp.kron(self.weights, DEVIATORIC.T, format="csr")  # (6M, 5P)
+        return (-(operator @ phi)).tocsc()
+
+    def patch_volumes(self, volumes: NDArray) -> NDArray:
+        """Volume (P,) m^3 of each patch, sum_e w_ep V_e (they sum to the tissue's)."""
+        return self.weights.T @ np.asarray(volumes, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Actuation:
+    """Active stress over a run: ``basis`` and its ``coefficients`` (T, P, 5) Pa at the T
+    capture frames (Catmull-Rom between them, as the driven motion)."""
+
+    basis: StressBasis
+    coefficients: NDArray
+
+    def __post_init__(self) -> None:
+        c = self.coefficients
+        if c.ndim != 3 or c.shape[1:] != (self.basis.n_patches, len(DEVIATORIC)):
+            raise ValueError(
+                f"actuation coefficients must be (T, {self.basis.n_patches}, "
+                f"{len(DEVIATORIC)}) Pa, got {c.shape}"
+            )
+        if not np.isfinite(c).all():
+            raise ValueError("actuation coefficients contain NaN or Inf")
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.coefficients)
+
+    def scaled(self, factors: NDArray) -> Actuation:
+        """The actuation with each patch's coefficients times ``factors`` (P,)."""
+        return Actuation(self.basis, self.coefficients * np.asarray(factors)[None, :, None])
+
+    def force(self, model: FemModel, free: NDArray, frame_dt: float) -> FrameForce:
+        """Active forces f_a (N) on the ``free`` (n_u,) DOFs of ``model`` at the frames."""
+        forces = self.basis.force_matrix(model_force_operator(model))[free]
+        values = (forces @ self.coefficients.reshape(self.n_frames, -1).T).T
+        return FrameForce(values, free, np.arange(len(free)), frame_dt, len(free))
+
+    def energy_scale(self, model: FemModel) -> float:
+        """Energy scale of the actuation, J: the largest over frames of sum_p V_p |c_p|^2 /
+        (4 mu_p), the elastic energy of each patch strained freely by its deviatoric active
+        stress (mu_p its volume-averaged shear modulus)."""
+        vol = self.basis.patch_volumes(model.volumes)
+        mu = (self.basis.weights.T @ (model.volumes * model.mu)) / vol
+        per_frame = (self.coefficients**2).sum(axis=2) @ (vol / (4.0 * mu))
+        return float(per_frame.max(initial=0.0))
