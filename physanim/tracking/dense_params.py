@@ -29,7 +29,7 @@ class DenseParams(BaseModel):
         5, ge=0, le=50, description="DIS flow: variational refinement iterations; count"
     )
     depth_sigma_px: float = Field(
-        1.5, ge=0.0, le=10.0, description="Gaussian smoothing of the depth before lifting; px"
+        2.5, ge=0.0, le=10.0, description="Gaussian smoothing of the depth before lifting; px"
     )
     visible_tolerance_m: float = Field(
         0.004, gt=0.0, le=0.05,
@@ -49,7 +49,7 @@ class DenseParams(BaseModel):
         description="observed motion this far from its smoothed neighbourhood is rejected; m",
     )  # fmt: skip
     smoothing_m: float = Field(
-        0.002, ge=0.0, le=0.05,
+        0.001, ge=0.0, le=0.05,
         description="length over which the motion is smoothed on the scan surface (gaps "
         "are filled from their neighbours over any distance); m",
     )  # fmt: skip
