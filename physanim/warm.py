@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from physanim.capture.raster import rasterize
+from physanim.export.animation import frame_normals
 from physanim.fem.warm import warm_kernels
 
 
@@ -25,11 +26,21 @@ def warm_rasterizer() -> float:
     return time.perf_counter() - t0
 
 
+def warm_export() -> float:
+    """The normals of one triangle's frames (compiling or loading the export's kernel, 3 s);
+    returns seconds."""
+    t0 = time.perf_counter()
+    triangle = np.array([[[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]]], np.float32)
+    frame_normals(triangle, np.array([[0, 1, 2]]))
+    return time.perf_counter() - t0
+
+
 if __name__ == "__main__":
     fem = warm_kernels()
     raster = warm_rasterizer()
+    export = warm_export()
     print(
         "numba kernels compiled (cache): FEM "
         + ", ".join(f"{k} factor {v:.1f} s" for k, v in fem.items())
-        + f"; demo rasteriser {raster:.1f} s"
+        + f"; demo rasteriser {raster:.1f} s; export normals {export:.1f} s"
     )

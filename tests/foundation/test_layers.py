@@ -30,8 +30,9 @@ LAYERS: list[set[str]] = [
     {"face"},  # face model, fit and FEM drive (uses mesh, fem, capture's actor)
     {"tracking"},  # tracking backends (use the face model's landmarks)
     {"evaluate"},
+    {"export"},  # USD, glTF and Alembic files of animated meshes (use mesh)
     {"render"},  # the run report compares evaluations
-    {"warm"},  # the setup's compile-ahead entry point (runs fem's and capture's kernels)
+    {"warm"},  # the setup's compile-ahead entry point (fem's, capture's, export's kernels)
 ]
 FORBIDDEN = ("prefect", "flows", "tasks", "cli")
 
