@@ -2,9 +2,11 @@
 
 The boundary conditions come from the library (``physanim.face.drive``): skull nodes fixed,
 mandible nodes turned by the jaw rotation estimated from the tracked landmarks, and the skin
-pulled by landmark springs (default), by the kinematic scan, or prescribed at single nodes (the
-seed, ``configs/drives/seed.yaml``), chosen by ``physanim.face.performance``. They and the
-tissue mesh and materials form a :class:`~physanim.fem.problem.FemProblem`, solved by
+moved by the active stress the ``actuate`` stage fitted to the capture (``drive.mode:
+actuation``, scaled per face region by ``drive.actuation_scale``), pulled by landmark springs
+(default), by the kinematic scan, or prescribed at single nodes (the seed,
+``configs/drives/seed.yaml``), chosen by ``physanim.face.performance``. They, the actuation
+and the tissue mesh and materials form a :class:`~physanim.fem.problem.FemProblem`, solved by
 ``physanim.fem.simulate`` at the capture frame rate, or with ``simulate.reduced.enabled`` in a
 reduced (POD) basis built from a full run of a basis material (``physanim.fem.preview``), for
 fast previews of material edits. Version history: CHANGELOG.md.
@@ -25,12 +27,13 @@ from pydantic import (
 
 from physanim.face.drive import FaceDrive
 from physanim.face.jaw import JawMotion
-from physanim.face.params import DriveParams, JawParams
+from physanim.face.params import ActuationParams, DriveParams, JawParams
 from physanim.fem.params import SimulateParams
 from physanim.fem.preview import ReducedParams
 from physanim.fem.problem import FemProblem
 from physanim.fem.simulate import SimResult
 from physanim.pipeline import StageContext, StageOutput, StageSpec
+from tasks.actuation import ActuateOutput, stage_drive
 from tasks.align import AlignOutput
 from tasks.materials import MaterialsOutput
 from tasks.tetra import TetraOutput
@@ -43,6 +46,9 @@ class SimulateStageParams(SimulateParams):
     model_config = ConfigDict(extra="forbid")
     drive: DriveParams = Field(default_factory=DriveParams, description="skin drive")
     jaw: JawParams = Field(default_factory=JawParams, description="mandible motion")
+    actuation: ActuationParams = Field(
+        default_factory=ActuationParams, description="the inverse step (stage 'actuate')"
+    )
     reduced: ReducedParams = Field(
         default_factory=ReducedParams, description="reduced (POD) preview of material edits"
     )
@@ -53,6 +59,9 @@ class SimulateStageParams(SimulateParams):
             raise ValueError(
                 "reduced.enabled: the reduced preview is linear; set corotational: false"
             )
+        if self.drive.mode == "actuation" and self.corotational:
+            raise ValueError("drive.mode actuation: the active stress is linear; set "
+                             "corotational: false")  # fmt: skip
         return self
 
     @model_serializer(mode="wrap")
@@ -88,26 +97,19 @@ def simulate_inputs(
     align: AlignOutput,
     tetra: TetraOutput,
     materials: MaterialsOutput,
+    actuate: ActuateOutput,
     params: SimulateStageParams,
 ) -> tuple[FemProblem, FaceDrive]:
-    """The FEM problem of the track, align, tetra and materials outputs, and the
-    :class:`~physanim.face.drive.FaceDrive` its boundary conditions came from."""
-    from physanim.face.performance import landmark_motion, performance_drive
-    from physanim.names import name_index
-
-    mouth = align.mouth()
-    pronasale = align.landmarks[name_index(align.landmark_names, ["pronasale"])[0]]
-    tissue = {k: getattr(tetra, k) for k in ("nodes", "tets", "skin", "bone", "side")}
-    drive = performance_drive(
-        track.landmark_names, track.template, landmark_motion(track.points, track.head_pose),
-        mouth, pronasale, align.motion, {**tissue, "skin_anchor": tetra.skin_anchor},
-        (align.scan_vertices, align.scan_faces), lambda: align.kinematic[...],
-        params.drive, params.jaw,
-    )  # fmt: skip
+    """The FEM problem of the track, align, tetra, materials and (in the 'actuation' drive)
+    actuate outputs, and the :class:`~physanim.face.drive.FaceDrive` its boundary conditions
+    came from."""
+    drive = stage_drive(track, align, tetra, params.drive, params.jaw)
     problem = FemProblem.driven(
         tetra.nodes, tetra.tets, materials.materials(), drive.prescribed,
         drive.prescribed_traj, 1.0 / float(track.fps), springs=drive.springs,
     )  # fmt: skip
+    if params.drive.mode == "actuation":
+        problem = problem.with_actuation(actuate.actuation(tetra.nodes, tetra.tets, params.drive))
     return problem, drive
 
 
@@ -117,6 +119,7 @@ def compute(
     align: AlignOutput,
     tetra: TetraOutput,
     materials: MaterialsOutput,
+    actuate: ActuateOutput,
     ctx: StageContext[SimulateStageParams],
 ) -> SimulateOutput:
     """displacements (T,n,3) float32 m, energies (T,) J, von Mises max and 99th percentile
@@ -124,7 +127,7 @@ def compute(
     from physanim.face.performance import performance_summary
     from physanim.fem.simulate import simulate_problem
 
-    problem, drive = simulate_inputs(track, align, tetra, materials, params)
+    problem, drive = simulate_inputs(track, align, tetra, materials, actuate, params)
     if params.reduced.enabled:
         from physanim.fem.preview import preview
 
@@ -135,6 +138,11 @@ def compute(
     else:
         result = simulate_problem(problem, params, ctx.progress("simulate"))
     summary = performance_summary(result, drive, int(tetra.skin.sum()), params, params.drive.mode)
+    if problem.actuation is not None:
+        summary["actuation"] = {
+            "patches": problem.actuation.basis.n_patches,
+            "scale": params.drive.actuation_scale,
+        }
     if params.reduced.enabled:
         summary.update(
             stepping="reduced (POD preview)",
@@ -161,7 +169,7 @@ def compute(
 SPEC = StageSpec.typed(
     "simulate",
     compute,
-    version="7",
+    version="8",
     doc="viscoelastic FEM (Newmark); skull fixed, mandible turned by the estimated jaw, skin "
-    "pulled by the tracked landmarks",
+    "pulled by the tracked landmarks or moved by the fitted actuation (drive.mode)",
 )

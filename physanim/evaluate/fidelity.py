@@ -20,12 +20,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from physanim.face.params import FACE_REGIONS
 from physanim.mesh.binding import BINDERS
 from physanim.mesh.kinematic import blend_frames, blend_matrix
 from physanim.mesh.seam import LOWER, UPPER, MouthLine
 
 #: Facial regions of the fidelity report, in order; every point gets one (or "other").
-REGIONS: tuple[str, ...] = ("mouth", "jaw_chin", "cheeks", "nose", "forehead")
+REGIONS: tuple[str, ...] = FACE_REGIONS
 
 
 @dataclass(frozen=True)

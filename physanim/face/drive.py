@@ -2,9 +2,11 @@
 
 * Bone side: skull nodes stay fixed in the head frame; mandible nodes turn with the jaw
   (:mod:`physanim.face.jaw`), weighted from 0 at the mouth line to 1 below it.
-* Skin: tracked landmarks pull small patches by springs (``landmarks``, default), the whole
-  skin is pulled towards the kinematic scan (``kinematic``), or each landmark's nearest skin
-  node follows it exactly (``prescribed``, the seed's setting).
+* Skin: moved by the tissue's fitted active stress (``actuation``: the skin is free here, the
+  actuation is the ``actuate`` stage's), tracked landmarks pull small patches by springs
+  (``landmarks``, default), the whole skin is pulled towards the kinematic scan
+  (``kinematic``), or each landmark's nearest skin node follows it exactly (``prescribed``,
+  the seed's setting).
 
 Everything is in the head-fixed scan frame (the marker template's frame), metres.
 """
@@ -26,8 +28,6 @@ from physanim.face.jaw import (
 )
 from physanim.face.params import DriveParams, JawParams
 from physanim.fem.boundary import SpringDrive, landmark_drive, target_drive
-from physanim.mesh.binding import Binding
-from physanim.mesh.kinematic import blend_frames, blend_matrix
 from physanim.mesh.seam import UPPER, MouthLine
 from physanim.mesh.tetra import boundary_faces, landmark_nodes
 from physanim.mesh.topology import vertex_areas
@@ -119,13 +119,6 @@ def estimate_face_jaw(
     return estimate_jaw(fallback[:, below], prior), ["fit"]
 
 
-def kinematic_targets(binding: Binding, scan_faces: NDArray, scan_motion: NDArray) -> NDArray:
-    """Displacements (T, N, 3) m of points bound to the scan (``binding``, scan faces (F, 3))
-    when the scan moves by ``scan_motion`` (T, V, 3) m (positions)."""
-    w = blend_matrix(binding, scan_faces, scan_motion.shape[1])
-    return blend_frames(w, scan_motion - scan_motion[:1])
-
-
 def face_drive(
     nodes: NDArray,
     tets: NDArray,
@@ -173,16 +166,18 @@ def face_drive(
         raise DriveError(f"simulate.drive.landmarks: {unknown} were not tracked ({names})")
     use = [names.index(n) for n in chosen if n not in params.exclude]
     lost = [names[i] for i in use if not np.isfinite(motion[:, i]).all()]
-    if lost:
+    if lost and params.mode != "actuation":
         warnings.append(f"landmarks never seen, not driving: {lost}")
     use = [i for i in use if names[i] not in lost]
     driving = [names[i] for i in use]
     springs = None
     prescribed, traj = bone_idx, bone_traj
-    if params.mode == "kinematic":
+    if params.mode == "actuation":  # the skin is free: the actuation moves it
+        driving = ["actuation"]
+    elif params.mode == "kinematic":
         if skin_targets is None:
             raise DriveError("simulate.drive.mode=kinematic needs the kinematic scan targets")
-        area = vertex_areas(nodes, _skin_faces(tets, skin))[free_skin]
+        area = skin_areas(nodes, tets, skin)[free_skin]
         on = area > 0  # skin nodes on no all-skin face (the rim's edge) carry no skin area
         springs = target_drive(
             free_skin[on], params.kinematic_stiffness_N_per_m2 * area[on], skin_targets[:, on]
@@ -214,7 +209,9 @@ def face_drive(
     return FaceDrive(prescribed, traj, springs, jaw, bone_idx, weight, driving, warnings)
 
 
-def _skin_faces(tets: NDArray, skin: NDArray) -> NDArray:
-    """Boundary faces (F, 3) of the tets whose nodes are all skin nodes."""
+def skin_areas(nodes: NDArray, tets: NDArray, skin: NDArray) -> NDArray:
+    """Skin area (N,) m^2 of each node: a third of each incident boundary face whose nodes
+    are all skin nodes (0 off the skin and at its rim's edge); nodes (N, 3) m, tets (M, 4),
+    skin (N,) bool."""
     outer = boundary_faces(tets)
-    return outer[skin[outer].all(axis=1)]
+    return vertex_areas(nodes, outer[skin[outer].all(axis=1)])

@@ -1,10 +1,17 @@
-"""Parameters of the face-model fit (``fit``) and of how the face drives the FEM (``simulate``)."""
+"""Parameters of the face-model fit (``fit``), of how the face drives the FEM (``simulate``)
+and of the inverse step that fits its actuation (``actuate``, ``simulate.actuation``)."""
 
 from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from physanim.mesh.params import UNIFORM, TissueMaterial
+
+#: facial regions of the fidelity report (``physanim.evaluate.fidelity.face_regions``) and of
+#: exaggeration gestures (``DriveParams.actuation_scale``, with 'face' for the whole face)
+FACE_REGIONS: tuple[str, ...] = ("mouth", "jaw_chin", "cheeks", "nose", "forehead")
 
 
 class FitParams(BaseModel):
@@ -84,11 +91,20 @@ class DriveParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    mode: Literal["landmarks", "kinematic", "prescribed"] = Field(
+    mode: Literal["actuation", "landmarks", "kinematic", "prescribed"] = Field(
         "landmarks",
-        description="'landmarks': each tracked landmark pulls a skin patch by a spring; "
-        "'kinematic': every skin node is pulled towards the kinematic scan; 'prescribed': "
-        "each landmark's nearest skin node follows it exactly (the seed)",
+        description="'actuation': the skin is moved by the tissue's active stress that the "
+        "'actuate' stage fitted to the captured motion at its basis material, held as the "
+        "material is edited; 'landmarks': each tracked landmark pulls a skin patch by a "
+        "spring; 'kinematic': every skin node is pulled towards the kinematic scan; "
+        "'prescribed': each landmark's nearest skin node follows it exactly (the seed)",
+    )
+    actuation_scale: dict[str, float] = Field(
+        default_factory=dict,
+        description="'actuation' mode, exaggeration gesture: the fitted actuation of a face "
+        f"region ({', '.join(FACE_REGIONS)}; by its patch centres) or of the whole "
+        "'face' times this factor (dimensionless, >= 0; a region's own factor wins over "
+        "'face'), e.g. {mouth: 1.5}",
     )
     landmarks: list[str] | None = Field(
         None, description="driving landmarks (default: every tracked landmark but 'exclude')"
@@ -112,4 +128,58 @@ class DriveParams(BaseModel):
         gt=0.0,
         le=1e12,
         description="'kinematic' mode: spring stiffness per skin area, N/m per m^2",
+    )
+
+    @field_validator("actuation_scale")
+    @classmethod
+    def _known_scales(cls, value: dict[str, float]) -> dict[str, float]:
+        unknown = sorted(set(value) - {*FACE_REGIONS, "face"})
+        if unknown:
+            raise ValueError(
+                f"unknown region(s) {unknown}; use names among {[*FACE_REGIONS, 'face']}"
+            )
+        negative = {k: v for k, v in value.items() if not v >= 0.0}
+        if negative:
+            raise ValueError(f"factors must be >= 0, got {negative}")
+        return value
+
+    def scale_of(self, region: str | None) -> float:
+        """The gesture factor of a patch in ``region`` (None: in none of them)."""
+        face = self.actuation_scale.get("face", 1.0)
+        return self.actuation_scale.get(region, face) if region else face
+
+
+class ActuationParams(BaseModel):
+    """The inverse step (stage ``actuate``): the active stress with which the static FEM at a
+    fixed basis material reproduces the captured skin motion, per frame
+    (``physanim.fem.inverse``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    basis_material: TissueMaterial = Field(
+        default_factory=lambda: UNIFORM.default.model_copy(deep=True),
+        description="uniform material of the inverse step (the seed's uniform model): a "
+        "fixed material, so no material edit runs the inverse step again (only E and nu "
+        "matter: the step is static)",
+    )
+    patch_spacing_m: float = Field(
+        0.008,
+        ge=0.003,
+        le=0.05,
+        description="actuation patches: every tet lies within this distance of a patch "
+        "centre, m; each patch reaches twice as far (5 deviatoric stress coefficients a patch)",
+    )
+    stress_cost_mm_per_kPa: float = Field(
+        0.003,
+        gt=0.0,
+        le=10.0,
+        description="regularisation: an RMS active stress of 1 kPa over the tissue costs as "
+        "much as an RMS skin misfit of this many mm (larger: smaller stresses, looser fit)",
+    )
+    rate_cost_mm_per_kPa: float = Field(
+        0.003,
+        ge=0.0,
+        le=10.0,
+        description="temporal smoothing: an RMS change of the active stress of 1 kPa from one "
+        "frame to the next costs as much as an RMS skin misfit of this many mm",
     )

@@ -9,21 +9,17 @@ by the kinematic scan (``DriveParams.mode == "kinematic"``) or prescribed at sin
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from physanim.face.drive import (
-    FaceDrive,
-    estimate_face_jaw,
-    face_drive,
-    fill_gaps,
-    head_frame,
-    kinematic_targets,
-)
+from physanim.face.drive import FaceDrive, estimate_face_jaw, face_drive, fill_gaps, head_frame
 from physanim.face.params import DriveParams, JawParams
 from physanim.fem.params import SimulateParams
+from physanim.mesh.kinematic import blend_frames, blend_matrix
 from physanim.mesh.seam import MouthLine, bind_across_seam
 
 
@@ -32,6 +28,38 @@ def landmark_motion(points: NDArray, head_pose: NDArray) -> NDArray:
     first frame in the head frame (head pose (T, 4, 4) removed, gaps filled)."""
     trajectories, _ = fill_gaps(head_frame(points, head_pose))
     return trajectories - trajectories[:1]
+
+
+@dataclass(frozen=True)
+class SkinBinding:
+    """The free skin nodes ``nodes`` (S,) of a tissue mesh (skin, not bone side) bound to a
+    scan: ``blend`` (S, V) barycentric weights of the scan's V vertices at each node's
+    closest point (never across the lip seam). Carries per-vertex captured motion to them."""
+
+    nodes: NDArray
+    blend: sp.csr_array
+
+    @classmethod
+    def of(
+        cls, tissue: dict[str, NDArray], mouth: MouthLine, scan: tuple[NDArray, NDArray]
+    ) -> SkinBinding:
+        """The binding of ``tissue``'s (``nodes``, ``skin``, ``bone``, ``side``) free skin
+        nodes to ``scan`` (vertices (V, 3) m, faces (F, 3)) cut along ``mouth``."""
+        nodes, skin, bone, side = (tissue[k] for k in ("nodes", "skin", "bone", "side"))
+        free = np.nonzero(skin & ~bone)[0]
+        binding = bind_across_seam(nodes[free], side[free], scan[0], scan[1], mouth)
+        return cls(free, blend_matrix(binding, scan[1], len(scan[0])))
+
+    def displacements(self, scan_motion: NDArray) -> NDArray:
+        """Displacements (T, S, 3) m from frame 0 of the nodes when the scan's vertices move
+        by ``scan_motion`` (T, V, 3) m (positions, or displacements from any rest)."""
+        used = np.unique(self.blend.indices)  # only the vertices the nodes are bound to
+        moved = np.asarray(scan_motion[:, used], dtype=np.float64)
+        return blend_frames(self.blend[:, used], moved - moved[:1])
+
+    def values(self, per_vertex: NDArray) -> NDArray:
+        """Per-frame scalars (T, V) of the scan's vertices (a confidence) at the nodes (T, S)."""
+        return (self.blend @ np.asarray(per_vertex, dtype=np.float64).T).T
 
 
 def performance_drive(
@@ -64,9 +92,7 @@ def performance_drive(
         )
     targets = None
     if drive.mode == "kinematic":
-        free = np.nonzero(skin & ~bone)[0]
-        binding = bind_across_seam(nodes[free], side[free], scan[0], scan[1], mouth)
-        targets = kinematic_targets(binding, scan[1], np.asarray(scan_motion(), np.float64))
+        targets = SkinBinding.of(tissue, mouth, scan).displacements(scan_motion())
     return face_drive(
         nodes, tets, skin, bone, side, tissue["skin_anchor"], mouth, jaw_motion,
         landmark_names, rest, motion, drive, jaw.blend_m, targets,

@@ -9,7 +9,7 @@ composes ``boundary`` (driven / fixed nodes, springs), ``actuation`` (active str
 per-tet sigma_a added to the law's stress, its nodal forces -sum_e V_e B_e^T sigma_a,e
 interpolated between frames like the driven motion), ``kinematics`` (linear / corotational),
 ``stepping`` (adaptive Newmark between frames) and ``monitors`` (energy, stress, inversion per
-frame).
+frame). ``inverse``: the actuation with which the static FEM reproduces observed motion.
 
 Element formulations (``SimulateParams.formulation``), thick-walled cylinder under internal
 pressure (plane strain, quarter section, b/a = 2), computed / Lame inner displacement:

@@ -153,6 +153,25 @@ def factorize(A: sp.spmatrix, solver: str = "auto") -> Solve:
     return without_subnormals(lu.solve, A.shape[0])
 
 
+def factorize_many(A: sp.spmatrix, solver: str = "auto") -> Solve:
+    """Like :func:`factorize`, for blocks of many right-hand sides (n, k): with CHOLMOD its
+    own supernodal solve, BLAS-3 over the block (the demo's static K_uu, 128 columns: 2.5 ms
+    a column against 9 ms by ``ParallelLDL``'s sweeps, which suit one or two columns)."""
+    if solver == "auto":
+        solver = "cholmod" if has_cholmod() else "superlu"
+    if solver != "cholmod":
+        return factorize(A, solver)
+    _require_cholmod()
+    from sksparse.cholmod import cholesky
+
+    A = sp.csc_matrix(A)
+    try:
+        factor = cholesky(A, ordering_method="metis")
+    except Exception:  # a CHOLMOD built without METIS  # noqa: BLE001
+        factor = cholesky(A, ordering_method="amd")
+    return without_subnormals(factor, A.shape[0])
+
+
 def factorize_split(
     A_el: sp.spmatrix,
     G: sp.spmatrix,

@@ -13,7 +13,7 @@ from physanim.fem.elements import ELEMENTS, Element
 from physanim.fem.geometry import element_dofs, shape_gradients
 from physanim.fem.laws import MaterialLaw
 from physanim.fem.materials import TetMaterials
-from physanim.fem.params import SimulateParams
+from physanim.fem.params import ModelParams
 
 
 # one pass per tet (strain, deviator, invariant): the numpy version made ~10 temporaries of
@@ -90,7 +90,7 @@ def build_model(
     nodes: np.ndarray,
     tets: np.ndarray,
     materials: TetMaterials,
-    params: SimulateParams | None = None,
+    params: ModelParams | None = None,
     *,
     law: MaterialLaw | None = None,
     element: Element | None = None,
@@ -100,7 +100,7 @@ def build_model(
     ``law`` (default ``params.law``) and ``element`` (default ``ELEMENTS[params.formulation]``)
     may be any :class:`MaterialLaw` / :class:`Element`.
     """
-    params = params or SimulateParams()
+    params = params or ModelParams()
     law = law or params.law
     element = element or ELEMENTS[params.formulation]
     nodes = np.asarray(nodes, dtype=np.float64)

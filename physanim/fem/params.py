@@ -9,7 +9,42 @@ from pydantic import BaseModel, ConfigDict, Field, SerializeAsAny, field_validat
 from physanim.fem.laws import KelvinVoigt, MaterialLaw, law_from_config
 
 
-class SimulateParams(BaseModel):
+class ModelParams(BaseModel):
+    """How the FEM model is assembled and its linear systems solved: element formulation,
+    mass matrix, constitutive law, sparse solver (what ``build_model`` and the inverse
+    step read)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    formulation: Literal["anp", "p1"] = Field(
+        "anp",
+        description="Element: 'anp' = 4-node tet with averaged nodal pressure (locking-free "
+        "volumetric part, default); 'p1' = plain 4-node tet (locks near nu = 0.5, as the seed)",
+    )
+    mass: Literal["consistent", "lumped"] = Field(
+        "consistent", description="Mass matrix: consistent (rho int N^T N dV) or row-sum lumped"
+    )
+    law: SerializeAsAny[MaterialLaw] = Field(
+        default_factory=KelvinVoigt,
+        description="constitutive law and its settings: {name: <registered law>, ...}; "
+        "'kelvin_voigt' (default) reads E, nu, eta, rho per tet "
+        "(physanim.fem.laws: LAWS lists the registered laws)",
+    )
+    solver: Literal["auto", "cholmod", "superlu", "superlu_colamd"] = Field(
+        "auto",
+        description="Sparse direct solver for the constant Newmark matrix A_uu (and the inverse "
+        "step's static K_uu): 'auto' = CHOLMOD "
+        "(scikit-sparse) when installed else SuperLU with MMD(A^T+A) ordering; "
+        "'superlu_colamd' = scipy's default splu (baseline)",
+    )
+
+    @field_validator("law", mode="before")
+    @classmethod
+    def _registered_law(cls, value: object) -> MaterialLaw:
+        return law_from_config(value)
+
+
+class SimulateParams(ModelParams):
     """Parameters of the viscoelastic tetrahedral FEM simulation."""
 
     model_config = ConfigDict(extra="forbid")
@@ -60,28 +95,8 @@ class SimulateParams(BaseModel):
         "relative of the float64 one; CHOLMOD only, other solvers stay float64), 'float64', "
         "or 'mixed': float32 with each solve refined once with the float64 matrix",
     )
-    formulation: Literal["anp", "p1"] = Field(
-        "anp",
-        description="Element: 'anp' = 4-node tet with averaged nodal pressure (locking-free "
-        "volumetric part, default); 'p1' = plain 4-node tet (locks near nu = 0.5, as the seed)",
-    )
-    mass: Literal["consistent", "lumped"] = Field(
-        "consistent", description="Mass matrix: consistent (rho int N^T N dV) or row-sum lumped"
-    )
-    law: SerializeAsAny[MaterialLaw] = Field(
-        default_factory=KelvinVoigt,
-        description="constitutive law and its settings: {name: <registered law>, ...}; "
-        "'kelvin_voigt' (default) reads E, nu, eta, rho per tet "
-        "(physanim.fem.laws: LAWS lists the registered laws)",
-    )
     corotational: bool = Field(
         False, description="Corotational (stiffness-warping) elasticity for large rotations"
-    )
-    solver: Literal["auto", "cholmod", "superlu", "superlu_colamd"] = Field(
-        "auto",
-        description="Sparse direct solver for the constant Newmark matrix A_uu: 'auto' = CHOLMOD "
-        "(scikit-sparse) when installed else SuperLU with MMD(A^T+A) ordering; "
-        "'superlu_colamd' = scipy's default splu (baseline)",
     )
     energy_blowup_factor: float = Field(
         1e3,
@@ -108,8 +123,3 @@ class SimulateParams(BaseModel):
                 f"viscosity_form: {data['viscosity']}}}"
             )
         return data
-
-    @field_validator("law", mode="before")
-    @classmethod
-    def _registered_law(cls, value: object) -> MaterialLaw:
-        return law_from_config(value)

@@ -220,6 +220,7 @@ def test_model_sweep_computes_shared_stages_once(model_sweep, demo_run) -> None:
     assert counts == {
         "ingest": 0, "track": 0, "fit": 0, "scan": 0, "align": 0, "tetra": 0,
         "tiles": 1,  # once for the three: the sweep renders every 6th frame
+        "dense": 0, "actuate": 0,  # the material edits reuse the captured scan and actuation
         "materials": 2, "simulate": 2, "evaluate": 2, "render": 3,
     }  # fmt: skip
     store = StageStore(ROOT / data / "runs" / "store.zarr")
@@ -290,8 +291,11 @@ def test_reduced_preview_of_a_model_against_its_full_run(model_sweep, demo_run) 
 
 def test_dag_upstream_and_downstream_closures() -> None:
     assert FACE.upstream("simulate") == [
-        "ingest", "track", "fit", "scan", "align", "tetra", "materials", "simulate"
+        "ingest", "track", "fit", "scan", "align", "dense", "tetra", "materials", "actuate",
+        "simulate",
     ]  # fmt: skip
+    # the inverse step reads no materials: a material edit never runs it again
+    assert "actuate" not in FACE.downstream("materials")
     assert FACE.upstream("tetra") == ["ingest", "track", "fit", "scan", "align", "tetra"]
     assert FACE.upstream("scan") == ["scan"]  # reads no stage: it runs beside ingest
     # the fit and kinematic tiles render while the tissue is meshed; no material edit

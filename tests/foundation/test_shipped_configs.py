@@ -26,6 +26,7 @@ OVERLAYS: dict[str, Pipeline] = {
     "models/*.yaml": FACE,
     "materials/*.yaml": FACE,
     "drives/*.yaml": FACE,
+    "gestures/*.yaml": FACE,
     "keyframe_walk.yaml": KEYFRAME,
 }
 DEFAULTS = {p.default_config.relative_to(CONFIGS).as_posix(): p for p in (FACE, ARM, KEYFRAME)}

@@ -1,0 +1,207 @@
+"""The inverse step: the actuation with which the FEM reproduces observed skin motion.
+
+At a fixed material (the *basis material*) and under Dirichlet conditions (prescribed DOFs c
+at d_c(t), e.g. the skull held and the mandible turned), the static FEM's free displacements
+at capture frame t are linear in the actuation coefficients a_t (P, 5) Pa of a
+:class:`~physanim.fem.actuation.StressBasis`:
+
+    d_u(t) = K_uu^-1 (-K_uc d_c(t)) + K_uu^-1 F_u a_t = p(t) + R a_t,
+
+F the basis' active forces per Pa (``StressBasis.force_matrix``). With S observed nodes (the
+skin) at targets y(t) (T, S, 3) m and weights w(t) (T, S) (skin area x capture confidence),
+the coefficients of all frames minimise
+
+    sum_t [ sum_i w_ti |(p + R a)_ti - y_ti|^2 / sum_i w_ti
+            + lambda sum_p v_p |a_tp|^2 + mu sum_p v_p |a_tp - a_(t-1)p|^2 ],
+
+v_p each patch's share of the tissue volume: the first term is the weighted mean square
+misfit (m^2), the others the mean square active stress over the tissue and its mean square
+change per frame (Pa^2), with lambda = ``stress_cost``^2 and mu = ``rate_cost``^2 (m/Pa: an
+RMS stress of 1 Pa costs as much as an RMS misfit of ``stress_cost`` m). Small norm keeps
+patches that move no observed node at zero; the smooth patches make the stress smooth in
+space, the difference penalty smooth in time.
+
+Cost: one factorisation of K_uu, 5 P + T solves (multi right-hand side), then the normal
+equations, coupled over frames by the difference penalty, by conjugate gradients
+preconditioned with their exact solution for the frame-mean weights: with
+v^-1/2 H v^-1/2 = Q Lambda Q^T (H = R^T W R) and the first-difference Laplacian L = P Gamma
+P^T the system is diagonal, (Lambda_i + lambda + mu Gamma_j). When the weights do not change
+over frames that is the solution (no iteration).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from threadpoolctl import threadpool_limits
+
+from physanim.fem.actuation import DEVIATORIC, StressBasis, model_force_operator
+from physanim.fem.boundary import BoundaryConditions
+from physanim.fem.geometry import node_dofs
+from physanim.fem.linsolve import factorize_many
+from physanim.fem.model import FemModel
+from physanim.fem.statics import free_dofs
+
+#: right-hand sides per multi-RHS solve (bounds the memory of the solves, n_u x this)
+SOLVE_BLOCK = 128
+
+
+@dataclass(frozen=True)
+class ActuationFit:
+    """The inverse step's answer for T frames and S observed nodes: ``coefficients``
+    (T, P, 5) Pa; the static FEM's displacements of the observed nodes with them,
+    ``fitted`` (T, S, 3) m, and without actuation (the conditions alone), ``passive``
+    (T, S, 3) m; conjugate-gradient ``iterations``; ``seconds`` per step."""
+
+    coefficients: NDArray
+    fitted: NDArray
+    passive: NDArray
+    iterations: int
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def _observed_positions(observed: NDArray, free: NDArray) -> NDArray:
+    """Positions (3S,) of the observed nodes' DOFs among the ``free`` DOFs; ValueError when
+    one is prescribed."""
+    dofs = node_dofs(np.asarray(observed, dtype=np.int64))
+    at = np.searchsorted(free, dofs)
+    if np.any(at >= len(free)) or not np.array_equal(free[np.minimum(at, len(free) - 1)], dofs):
+        raise ValueError("observed nodes must be free (not prescribed)")
+    return at
+
+
+def response(
+    model: FemModel,
+    basis: StressBasis,
+    conditions: BoundaryConditions,
+    observed: NDArray,
+    solver: str = "auto",
+) -> tuple[NDArray, NDArray, dict[str, float]]:
+    """The static responses of the ``observed`` (S,) nodes: R (3S, 5P) m per Pa of each
+    coefficient and the passive displacements p (T, 3S) m under ``conditions`` alone; with
+    the seconds spent factorising K_uu and solving."""
+    t0 = time.perf_counter()
+    pres = conditions.prescribed_dofs
+    free = free_dofs(model.n_dofs, pres)
+    at = _observed_positions(observed, free)
+    rows = sp.csr_matrix(model.K)[free]
+    solve = factorize_many(rows[:, free], solver)
+    t_fac = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    d_c = conditions.prescribed(conditions.frame_dt * np.arange(conditions.n_frames))[0]
+    forces = basis.force_matrix(model_force_operator(model))[free]
+    rhs = sp.hstack([forces, sp.csc_matrix(-(rows[:, pres] @ d_c.T))], format="csc")
+    out = np.empty((len(at), rhs.shape[1]))
+    for j in range(0, rhs.shape[1], SOLVE_BLOCK):
+        out[:, j : j + SOLVE_BLOCK] = solve(rhs[:, j : j + SOLVE_BLOCK].toarray())[at]
+    seconds = {"factorization": t_fac, "solves": time.perf_counter() - t0}
+    return out[:, : basis.size], out[:, basis.size :].T, seconds
+
+
+def _difference_laplacian(n: int) -> NDArray:
+    """L (n, n) with a^T L a = sum_t |a_t - a_(t-1)|^2 (first differences of n frames)."""
+    D = np.diff(np.eye(n), axis=0)
+    return D.T @ D
+
+
+def solve_coefficients(
+    R: NDArray,
+    residual_targets: NDArray,
+    weights: NDArray,
+    volume_share: NDArray,
+    stress_cost: float,
+    rate_cost: float,
+    rtol: float = 1e-6,
+    max_iter: int = 500,
+) -> tuple[NDArray, int]:
+    """Minimiser a (T, n) of the module docstring's objective for responses R (3S, n) m/Pa,
+    targets minus passive motion ``residual_targets`` (T, 3S) m, ``weights`` (T, S) >= 0 and
+    ``volume_share`` (n,) v of each coefficient's patch; ``stress_cost`` and ``rate_cost``
+    m/Pa. Returns it and the conjugate-gradient iterations after the preconditioned guess."""
+    n_frames = len(weights)
+    total = weights.sum(axis=1, keepdims=True)
+    w = np.repeat(np.divide(weights, total, out=np.zeros_like(weights), where=total > 0), 3, 1)
+    lam, mu = stress_cost**2, rate_cost**2
+    lap = _difference_laplacian(n_frames)
+    v = np.asarray(volume_share, dtype=np.float64)
+
+    def apply(a: NDArray) -> NDArray:  # a (n, T) -> the normal equations' matrix times a
+        return R.T @ (w.T * (R @ a)) + v[:, None] * (lam * a + mu * (a @ lap))
+
+    # exact for the frame-mean weights, diagonal in (Q, P): the preconditioner
+    s = 1.0 / np.sqrt(v)
+    hbar = (R * w.mean(axis=0)[:, None]).T @ R
+    eig_h, Q = np.linalg.eigh(s[:, None] * hbar * s[None, :])
+    eig_l, P = np.linalg.eigh(lap)
+    denom = np.maximum(eig_h, 0.0)[:, None] + lam + mu * eig_l[None, :]
+
+    def precondition(r: NDArray) -> NDArray:
+        z = (Q.T @ (s[:, None] * r) @ P) / denom
+        return s[:, None] * (Q @ z @ P.T)
+
+    b = R.T @ (w * residual_targets).T  # (n, T)
+    a = precondition(b)
+    r = b - apply(a)
+    z = precondition(r)
+    p, rz = z.copy(), float((r * z).sum())
+    norm_b, it = float(np.linalg.norm(b)), 0
+    while np.linalg.norm(r) > rtol * norm_b and it < max_iter:
+        q = apply(p)
+        alpha = rz / float((p * q).sum())
+        a += alpha * p
+        r -= alpha * q
+        z = precondition(r)
+        rz, rz_old = float((r * z).sum()), rz
+        p = z + (rz / rz_old) * p
+        it += 1
+    return a.T, it
+
+
+def fit_actuation(
+    model: FemModel,
+    basis: StressBasis,
+    conditions: BoundaryConditions,
+    observed: NDArray,
+    targets: NDArray,
+    weights: NDArray,
+    stress_cost: float,
+    rate_cost: float,
+    solver: str = "auto",
+) -> ActuationFit:
+    """The actuation with which ``model`` (the basis material, static) under ``conditions``
+    (driven and fixed nodes; no springs) moves the ``observed`` (S,) free nodes to
+    ``targets`` (T, S, 3) m displacements, weighted by ``weights`` (T, S) >= 0; penalties
+    ``stress_cost`` and ``rate_cost`` in m/Pa (module docstring)."""
+    n_frames, n_obs = np.shape(weights)
+    if conditions.springs is not None:
+        raise ValueError("the inverse step takes Dirichlet conditions only, not springs")
+    if np.shape(targets) != (n_frames, n_obs, 3) or n_frames != conditions.n_frames:
+        raise ValueError(
+            f"targets {np.shape(targets)} and weights {np.shape(weights)} must be (T, S, 3) "
+            f"and (T, S) with T = {conditions.n_frames} frames"
+        )
+    if np.any(weights < 0) or not np.isfinite(weights).all():
+        raise ValueError("weights must be finite and >= 0")
+    R, passive, seconds = response(model, basis, conditions, observed, solver)
+    t0 = time.perf_counter()
+    vol = basis.patch_volumes(model.volumes)
+    share = np.repeat(vol / vol.sum(), len(DEVIATORIC))
+    y = np.asarray(targets, dtype=np.float64).reshape(n_frames, -1)
+    # dense products of a few hundred columns: one BLAS thread (two, on cores other
+    # processes use, took 10 times as long on the demo)
+    with threadpool_limits(limits=1, user_api="blas"):
+        a, iterations = solve_coefficients(
+            R, y - passive, np.asarray(weights, float), share, stress_cost, rate_cost
+        )
+    seconds["least_squares"] = time.perf_counter() - t0
+    return ActuationFit(
+        coefficients=a.reshape(n_frames, basis.n_patches, len(DEVIATORIC)),
+        fitted=(passive + a @ R.T).reshape(n_frames, n_obs, 3),
+        passive=passive.reshape(n_frames, n_obs, 3),
+        iterations=iterations,
+        seconds=seconds,
+    )

@@ -1,0 +1,222 @@
+"""Stage ``actuate``: the inverse step, the tissue's active stress that performs the capture.
+
+Per capture frame, the actuation (active stress over smooth patches of the tissue,
+``physanim.fem.actuation``) with which the static FEM at a fixed basis material
+(``simulate.actuation.basis_material``; never the ``materials`` stage's output, so a material
+edit never runs this stage again) moves the free skin as captured, with the skull held and
+the mandible turned as the ``simulate`` drive does (``physanim.fem.inverse``), each skin
+node weighted by its skin area and the capture's confidence there. The stage reads
+the ``simulate`` section (its model, ``jaw`` and ``actuation`` settings), so the inverse step
+and the FEM run share them; ``simulate.drive.mode: actuation`` runs the edited material with
+this actuation held. The captured motion is read in one place, :func:`captured_motion`.
+Version history: CHANGELOG.md.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from pydantic import ConfigDict, Field
+
+from physanim.face.params import ActuationParams, DriveParams, JawParams
+from physanim.fem.params import ModelParams
+from physanim.pipeline import StageContext, StageOutput, StageSpec
+from tasks.align import AlignOutput
+from tasks.dense import DenseOutput
+from tasks.tetra import TetraOutput
+from tasks.track import TrackOutput
+
+if TYPE_CHECKING:
+    from physanim.face.drive import FaceDrive
+    from physanim.fem.actuation import Actuation
+
+
+class ActuateParams(ModelParams):
+    """The inverse step's settings, from the ``simulate`` section: the FEM model's (element,
+    law, solver), the mandible's motion and the fit's."""
+
+    model_config = ConfigDict(extra="forbid")
+    jaw: JawParams = Field(default_factory=JawParams, description="mandible motion")
+    actuation: ActuationParams = Field(
+        default_factory=ActuationParams, description="the inverse step (stage 'actuate')"
+    )
+
+
+@dataclass(frozen=True)
+class ActuateOutput(StageOutput):
+    """The fitted actuation of T frames over P patches: ``coefficients`` (T, P, 5) Pa of the
+    deviatoric stress directions (``physanim.fem.actuation.DEVIATORIC``) of the patches
+    centred at ``centres`` (P, 3) m reaching ``radius_m`` m; ``patch_region`` (P,) int8 index
+    of each centre's face region into ``regions`` (-1: none); ``skin_nodes`` (S,) the free
+    skin nodes fitted; ``residual`` (T,) and ``residual_regions`` (T, len(regions)) the static
+    fit's relative displacement error against the captured motion (NaN: nothing moves over
+    1 mm), ``passive`` (T,) the same for the mandible alone (no actuation)."""
+
+    coefficients: np.ndarray
+    centres: np.ndarray
+    patch_region: np.ndarray
+    skin_nodes: np.ndarray
+    residual: np.ndarray
+    residual_regions: np.ndarray
+    passive: np.ndarray
+    regions: list[str] = field(default_factory=list)
+    radius_m: float = 0.0
+
+    def actuation(self, nodes: np.ndarray, tets: np.ndarray, drive: DriveParams) -> Actuation:
+        """The actuation over the tet mesh (``nodes`` (N, 3) m, ``tets`` (M, 4), tetra's)
+        with each patch's coefficients times its region's ``drive.actuation_scale``."""
+        from physanim.fem.actuation import Actuation, StressBasis
+
+        basis = StressBasis.patches(nodes, tets, self.centres, self.radius_m)
+        names = [self.regions[r] if r >= 0 else None for r in self.patch_region]
+        factors = np.array([drive.scale_of(n) for n in names])
+        return Actuation(basis, self.coefficients).scaled(factors)
+
+
+def captured_motion(dense: DenseOutput) -> tuple[np.ndarray, np.ndarray]:
+    """The captured skin motion the inverse step fits: per-vertex positions (T, V, 3) m in
+    the head frame on the vertices of align's scan, and their confidence (T, V) in [0, 1]:
+    the ``dense`` stage's captured scan (dense capture, or the kinematic scan with
+    ``dense.method: kinematic``)."""
+    return np.asarray(dense.motion[...]), np.asarray(dense.confidence, dtype=np.float64)
+
+
+def stage_drive(
+    track: TrackOutput,
+    align: AlignOutput,
+    tetra: TetraOutput,
+    drive: DriveParams,
+    jaw: JawParams,
+) -> FaceDrive:
+    """The face drive (``physanim.face.performance``) of the track, align and tetra outputs."""
+    from physanim.face.performance import landmark_motion, performance_drive
+    from physanim.names import name_index
+
+    pronasale = align.landmarks[name_index(align.landmark_names, ["pronasale"])[0]]
+    tissue = {k: getattr(tetra, k) for k in ("nodes", "tets", "skin", "bone", "side")}
+    return performance_drive(
+        track.landmark_names, track.template, landmark_motion(track.points, track.head_pose),
+        align.mouth(), pronasale, align.motion, {**tissue, "skin_anchor": tetra.skin_anchor},
+        (align.scan_vertices, align.scan_faces), lambda: align.kinematic[...], drive, jaw,
+    )  # fmt: skip
+
+
+def compute(
+    params: ActuateParams,
+    track: TrackOutput,
+    align: AlignOutput,
+    dense: DenseOutput,
+    tetra: TetraOutput,
+    ctx: StageContext[ActuateParams],
+) -> ActuateOutput:
+    """Coefficients (T, P, 5) Pa, patch centres (P, 3) m and regions, the fit's relative
+    residual per frame (T,) and face region (T, R)."""
+    from physanim.evaluate.fidelity import REGIONS, face_regions, motion_fidelity
+    from physanim.face.drive import skin_areas
+    from physanim.face.performance import SkinBinding
+    from physanim.fem.actuation import StressBasis
+    from physanim.fem.boundary import BoundaryConditions
+    from physanim.fem.inverse import fit_actuation
+    from physanim.fem.materials import TetMaterials
+    from physanim.fem.model import build_model
+
+    report = ctx.progress("actuate")
+    report(0, 3)
+    t_start = t0 = time.perf_counter()
+    nodes, tets = tetra.nodes, tetra.tets
+    drive = stage_drive(track, align, tetra, DriveParams(mode="actuation"), params.jaw)
+    conditions = BoundaryConditions.checked(
+        len(nodes), drive.prescribed, drive.prescribed_traj, 1.0 / float(track.fps)
+    )
+    tissue = {k: getattr(tetra, k) for k in ("nodes", "skin", "bone", "side")}
+    binding = SkinBinding.of(tissue, align.mouth(), (align.scan_vertices, align.scan_faces))
+    motion, confidence = captured_motion(dense)
+    targets = binding.displacements(motion)
+    weights = skin_areas(nodes, tets, tetra.skin)[binding.nodes] * binding.values(confidence)
+    t_drive = time.perf_counter() - t0
+    report(1, 3)
+
+    t0 = time.perf_counter()
+    fit_params, m = params.actuation, params.actuation.basis_material
+    materials = TetMaterials.uniform(
+        len(tets), E=m.E_kPa * 1e3, nu=m.nu, eta=m.eta_Pa_s, rho=m.rho_kg_m3, **m.fields
+    )
+    model = build_model(nodes, tets, materials, params)
+    basis = StressBasis.covering(nodes, tets, fit_params.patch_spacing_m)
+    t_model = time.perf_counter() - t0
+    report(2, 3)
+    fit = fit_actuation(
+        model, basis, conditions, binding.nodes, targets, weights,
+        fit_params.stress_cost_mm_per_kPa * 1e-6, fit_params.rate_cost_mm_per_kPa * 1e-6,
+        params.solver,
+    )  # fmt: skip
+    report(3, 3)
+
+    landmarks = align.landmark_positions()
+    labels = face_regions(nodes[binding.nodes], landmarks)
+    residual = motion_fidelity(fit.fitted, targets, labels)
+    passive = motion_fidelity(fit.passive, targets, labels).overall
+    seconds = {"drive": t_drive, "model": t_model, **fit.seconds}
+    seconds["total"] = time.perf_counter() - t_start
+    summary = _summary(fit, targets, weights, residual, passive, seconds)
+    summary.update(patches=basis.n_patches, skin_nodes=len(binding.nodes))
+    return ActuateOutput(
+        coefficients=fit.coefficients,
+        centres=basis.centres,
+        patch_region=face_regions(basis.centres, landmarks),
+        skin_nodes=binding.nodes,
+        residual=residual.overall,
+        residual_regions=residual.regions,
+        passive=passive,
+        regions=list(REGIONS),
+        radius_m=basis.radius,
+        summary=summary,
+    )
+
+
+def _summary(
+    fit: Any, targets: np.ndarray, weights: np.ndarray, residual: Any, passive: np.ndarray,
+    seconds: dict[str, float],
+) -> dict[str, Any]:  # fmt: skip
+    """The stage summary: the fit's relative residual overall and per region at the frame of
+    the largest captured motion and at its worst frame, the weighted RMS misfit (mm), the
+    peak active stress (kPa), iterations and seconds."""
+    from physanim.evaluate.fidelity import REGIONS
+
+    def r(x: float) -> float | None:
+        return None if not np.isfinite(x) else round(float(x), 4)
+
+    moved = np.sqrt(np.einsum("ts,tsc->t", weights, targets**2) / weights.sum(axis=1))
+    misfit = np.einsum("ts,tsc->t", weights, (fit.fitted - targets) ** 2) / weights.sum(axis=1)
+    peak = int(moved.argmax())
+    worst = int(np.nanargmax(residual.overall)) if np.isfinite(residual.overall).any() else None
+    return {
+        "peak_motion_frame": peak,
+        "residual_at_peak_motion": {
+            "overall": r(residual.overall[peak]),
+            "passive": r(passive[peak]),
+            **{name: r(residual.regions[peak, i]) for i, name in enumerate(REGIONS)},
+        },
+        "residual_worst_frame": worst,
+        "residual_worst": None if worst is None else r(residual.overall[worst]),
+        "misfit_rms_mm": round(float(np.sqrt(misfit.mean())) * 1e3, 4),
+        "motion_rms_mm": round(float(np.sqrt((moved**2).mean())) * 1e3, 4),
+        "peak_active_stress_kPa": round(
+            float(np.linalg.norm(fit.coefficients, axis=2).max()) * 1e-3, 3
+        ),
+        "cg_iterations": fit.iterations,
+        "seconds": {k: round(v, 3) for k, v in seconds.items()},
+    }
+
+
+SPEC = StageSpec.typed(
+    "actuate",
+    compute,
+    version="1",
+    doc="inverse step: per-frame active stress with which the FEM at a fixed basis material "
+    "reproduces the captured skin motion (simulate's jaw, model and actuation settings)",
+    section="simulate",
+)
