@@ -14,26 +14,21 @@ of them, to check what was tuned); :data:`PERFORMANCE_NAMES` holds both.
 Datasets: ``<performance>-s<seed>[-coarse][-markerless]`` (:func:`dataset_name`), full
 (:data:`FULL_FRAMES` frames) or coarse (:data:`COARSE_FRAMES`), with or without painted
 markers; the pipeline generates a missing one on demand from its name (``--dataset
-data/library/lips-s1-coarse``; ``tasks.ingest.ensure_demo``). Generate them in bulk::
-
-    python -m physanim.capture.library [--out data/library] [--coarse] [--only NAME ...]
-        [--seeds 0 1 2] [--markerless] [--force] [--workers N]
+data/library/lips-s1-coarse``; ``tasks.ingest.ensure_demo``). Generate them in bulk with
+``python -m physanim.capture.make_library`` (``physanim.capture.make_library``).
 """
 
 from __future__ import annotations
 
-import argparse
 import re
-import time
 import zlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from physanim.capture.expressions import face_field
-from physanim.capture.params import DemoParams
 from physanim.capture.performance import (
     AnalyticFaceField,
     ExpressionModel,
@@ -43,12 +38,15 @@ from physanim.capture.performance import (
     moving_head,
 )
 
+if TYPE_CHECKING:
+    from physanim.capture.params import DemoParams  # whose validator imports this module
+
 #: The demo's own performance (``demo_performance`` with ``AnalyticFaceField``).
 DEMO = "demo"
 #: Frames of a full dataset (3 s at 30 fps, like the demo) and of a coarse one (tests).
 FULL_FRAMES = 90
 COARSE_FRAMES = 24
-#: Seeds ``python -m physanim.capture.library`` generates by default.
+#: Seeds ``python -m physanim.capture.make_library`` generates by default.
 DEFAULT_SEEDS = (0, 1, 2)
 
 
@@ -172,12 +170,10 @@ def dataset_name(performance: str, seed: int, *, coarse: bool = False, markers: 
     )
 
 
-def library_params(name: str, base: DemoParams | None = None) -> DemoParams | None:
-    """The demo parameters that generate dataset ``name``: ``base`` (default
-    ``DemoParams()``) for ``demo``; for a library dataset (``dataset_name``'s form),
-    ``base``'s with the performance, seed, frame count and markers the name gives; None
-    for any other name."""
-    base = base or DemoParams()
+def library_params(name: str, base: DemoParams) -> DemoParams | None:
+    """The demo parameters that generate dataset ``name``: ``base`` for ``demo``; for a
+    library dataset (``dataset_name``'s form), ``base``'s with the performance, seed, frame
+    count and markers the name gives; None for any other name."""
     if name == DEMO:
         return base
     match = _NAME.fullmatch(name)
@@ -189,75 +185,4 @@ def library_params(name: str, base: DemoParams | None = None) -> DemoParams | No
         "n_frames": COARSE_FRAMES if match["coarse"] else FULL_FRAMES,
         "markers": match["bare"] is None,
     }
-    return DemoParams(**{**base.model_dump(), **update})
-
-
-def generate_library(
-    out: Path,
-    names: Sequence[str] = PERFORMANCE_NAMES,
-    seeds: Sequence[int] = DEFAULT_SEEDS,
-    *,
-    coarse: bool = False,
-    markers: bool = True,
-    force: bool = False,
-    workers: int | None = None,
-    log: Callable[[str], None] = print,
-) -> list[Path]:
-    """Generate one dataset folder ``out/<dataset_name>`` per performance and seed (those
-    already recorded are kept unless ``force``); ``log`` gets one line per dataset.
-    Returns the folders."""
-    from physanim.capture.demo import generate_demo  # open3d: only when generating
-    from physanim.capture.ingest import has_recording
-
-    jobs = [dataset_name(n, s, coarse=coarse, markers=markers) for n in names for s in seeds]
-    folders = []
-    for i, job in enumerate(jobs, 1):
-        folder = Path(out) / job
-        folders.append(folder)
-        if has_recording(folder) and not force:
-            log(f"[{i}/{len(jobs)}] {folder}: present (kept)")
-            continue
-        params = library_params(job)
-        assert params is not None
-        start = time.perf_counter()
-        generate_demo(folder, params=params, workers=workers)
-        took = time.perf_counter() - start
-        log(f"[{i}/{len(jobs)}] {folder}: {params.n_frames} frames in {took:.0f} s")
-    return folders
-
-
-def main(argv: Sequence[str] | None = None) -> None:
-    """Command line: see the module docstring."""
-    ap = argparse.ArgumentParser(
-        prog="python -m physanim.capture.library",
-        description="Generate the performance library's datasets (one folder per performance "
-        "and seed). Tuning part: " + ", ".join(TUNING) + "; held out: " + ", ".join(HELD_OUT),
-    )
-    ap.add_argument("--out", type=Path, default=Path("data/library"), help="parent folder")
-    ap.add_argument(
-        "--coarse", action="store_true", help=f"{COARSE_FRAMES} frames (else {FULL_FRAMES})"
-    )
-    part = ap.add_mutually_exclusive_group()
-    part.add_argument("--only", nargs="+", choices=PERFORMANCE_NAMES, help="these performances")
-    part.add_argument("--part", choices=("tuning", "held-out"), help="one part of the library")
-    ap.add_argument("--seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS), help="seeds")
-    ap.add_argument("--markerless", action="store_true", help="no painted marker dots")
-    ap.add_argument("--force", action="store_true", help="regenerate datasets already there")
-    ap.add_argument("--workers", type=int, default=None, help="render processes (default: cores)")
-    args = ap.parse_args(argv)
-    names = (
-        args.only or {"tuning": TUNING, "held-out": HELD_OUT, None: PERFORMANCE_NAMES}[args.part]
-    )
-    generate_library(
-        args.out,
-        names,
-        args.seeds,
-        coarse=args.coarse,
-        markers=not args.markerless,
-        force=args.force,
-        workers=args.workers,
-    )
-
-
-if __name__ == "__main__":
-    main()
+    return base.model_copy(update=update)

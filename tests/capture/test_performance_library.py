@@ -262,7 +262,7 @@ def test_performance_names_are_checked_and_dataset_names_round_trip() -> None:
         DemoParams(performance="yawn")
     base = DemoParams(color_noise=2.0)
     assert library_params(DEMO, base) is base
-    assert library_params("my-capture", base) is None and library_params("yawn-s0") is None
+    assert library_params("my-capture", base) is None and library_params("yawn-s0", base) is None
     for name in PERFORMANCE_NAMES:
         for coarse in (False, True):
             for markers in (False, True):
@@ -328,7 +328,7 @@ def test_markerless_render_has_no_dots_and_differs_only_at_them(
 
 
 def test_a_coarse_library_dataset_holds_its_performance(tmp_path: Path) -> None:
-    params = library_params("emotions-s1-coarse")
+    params = library_params("emotions-s1-coarse", DemoParams())
     assert params is not None
     spec = LIBRARY["emotions"]
     params = params.model_copy(update={"n_frames": 13})  # peaks at frames 2, 6, 10
