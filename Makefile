@@ -38,11 +38,6 @@ $(VENV)/.installed: pyproject.toml
 	@if [ -f /usr/include/suitesparse/cholmod.h ]; then \
 	  $(PY) -m pip install --quiet -e '.[cholmod]' || echo "scikit-sparse did not build; FEM uses SuperLU"; \
 	else echo "no SuiteSparse headers (make setup-system): FEM uses SuperLU"; fi
-	@# the Khronos glTF validator (npm), for the export tests (skipped without it)
-	@if command -v npm >/dev/null; then \
-	  npm install --silent --no-audit --no-fund --prefix $(VENV)/gltf-validator gltf-validator@2.0.0-dev.3.10 \
-	  || echo "gltf-validator did not install: its test is skipped"; \
-	else echo "no npm: the glTF validator test is skipped"; fi
 	@# compile the numba kernels now (about 30 s), not inside the first pipeline run
 	$(PY) -m physanim.warm
 	@touch $@
