@@ -19,9 +19,11 @@ from physanim.pipeline import Pipeline, PipelineConfig, PlanEntry
 from physanim.store import StageStore
 from physanim.store.stage_store import LATEST
 from tasks import (
+    actuation,
     align,
     dense,
     evaluate,
+    export,
     fit,
     ingest,
     materials,
@@ -67,9 +69,11 @@ FACE = Pipeline(
         tiles.SPEC,
         tetra.SPEC,
         materials.SPEC,
+        actuation.SPEC,
         simulate.SPEC,
         evaluate.SPEC,
         render.SPEC,
+        export.SPEC,
     ),
     default_config=CONFIGS / "default.yaml",
     extra_sections={"demo": DemoParams},
