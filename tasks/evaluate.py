@@ -29,13 +29,9 @@ class EvaluateOutput(FaceEvaluation, StageOutput):
 def fingerprint(dataset: DatasetParams, params: EvaluateParams) -> Mapping[str, object]:
     """Size and modification time of every file of the ground truth (an edited truth re-runs
     evaluate)."""
-    from physanim.store import files_fingerprint
+    from physanim.evaluate.truth import truth_fingerprint
 
-    truth = dataset.path / params.truth
-    if not truth.exists():
-        return {"truth": "none"}
-    files = [p for p in truth.rglob("*") if p.is_file()] if truth.is_dir() else [truth]
-    return {"truth": files_fingerprint(files, dataset.path)}
+    return truth_fingerprint(dataset.path, params.truth)
 
 
 def face_run(

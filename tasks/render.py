@@ -1,10 +1,12 @@
-"""Stage ``render``: side-by-side video of capture | model fit | kinematic scan | FEM, plots.
+"""Stage ``render``: side-by-side video of capture | model fit | captured scan | FEM | the
+scan and the FEM from the side, plots.
 
 Per frame: the captured colour frame with the tracked landmarks, the CANDIDE-style fit, the
-kinematic (bound) scan and the FEM skin coloured by displacement, in one panel
+captured scan and the FEM skin coloured by displacement from the front, then the captured
+scan and the FEM skin from the side (``side_view_deg``), in one panel
 (``physanim.render.face_panel``); PNG frames, an MP4 at the capture frame rate and matplotlib
 plots (``physanim.render.plots.plot_face_run``), all in this output's files/. The fit and
-kinematic tiles come from the ``tiles`` stage. Version history: CHANGELOG.md.
+captured-scan tiles come from the ``tiles`` stage. Version history: CHANGELOG.md.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from tasks.track import TrackOutput
 
 #: What the render stage's files show (a report lists those present), path -> caption.
 FILES = {
-    "panel.mp4": "Capture | fit | kinematic scan | FEM",
+    "panel.mp4": "Capture | fit | captured scan | FEM | captured scan and FEM from the side",
     "fidelity.png": "Motion fidelity against the truth, per region (0 = moves like the actor)",
     "lip_gap.png": "Lip gap: truth, FEM, kinematic scan",
     "jaw.png": "Jaw opening estimated from the tracked mandible landmarks",
@@ -90,7 +92,8 @@ def compute(
 SPEC = StageSpec.typed(
     "render",
     compute,
-    version="6",
-    doc="panel video (capture | fit | kinematic | FEM), symmetry / mouth / energy plots",
+    version="7",
+    doc="panel video (capture | fit | captured scan | FEM | scan and FEM from the side), "
+    "symmetry / mouth / energy plots",
     files=FILES,
 )

@@ -1,18 +1,22 @@
-"""Stage ``tiles``: the model-fit and kinematic-scan tiles of the panel video.
+"""Stage ``tiles``: the model-fit and captured-scan tiles of the panel video.
 
-They depend on the alignment only, so they render while the tissue is meshed, and no
-material edit renders them again; ``render`` adds the capture and the FEM tiles. The tile
-size, frame stride and turntable are the ``render`` section's (one setting for every tile).
+They depend on the alignment and the dense capture only, so they render while the tissue is
+meshed, and no material edit renders them again; ``render`` adds the capture and the FEM
+tiles. The captured scan is seen from the front and from the side (``side_view_deg``),
+coloured by its error against the dataset's ground truth where asked (``scan_colour``). The
+tile size, frame stride, turntable and these are the ``render`` section's (one setting for
+every tile).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from physanim.pipeline import StageContext, StageOutput, StageSpec
-from physanim.render.face_panel import FIT_TITLE, KINEMATIC_TITLE, TileParams
+from physanim.pipeline import DatasetParams, StageContext, StageOutput, StageSpec
+from physanim.render.face_panel import FIT_TITLE, KINEMATIC_TITLE, SIDE, TileParams
 from tasks.align import AlignOutput
 from tasks.dense import DenseOutput
 
@@ -20,35 +24,70 @@ from tasks.dense import DenseOutput
 @dataclass(frozen=True)
 class TilesOutput(StageOutput):
     """R rendered frames: ``frames`` (R,) their indices, ``fit`` and ``kinematic`` (R, H, W,
-    3) uint8 RGB tiles of the fitted motion mesh and of the captured scan (stage ``dense``)."""
+    3) uint8 RGB tiles of the fitted motion mesh and of the captured scan (stage ``dense``)
+    from the front, ``kinematic_side`` of the captured scan from the side (None: no side
+    view)."""
 
     frames: np.ndarray
     fit: np.ndarray
     kinematic: np.ndarray
+    kinematic_side: np.ndarray | None = None
 
     def by_title(self) -> dict[str, np.ndarray]:
         """Panel title -> tiles, in panel order."""
-        return {FIT_TITLE: self.fit, KINEMATIC_TITLE: self.kinematic}
+        side = {} if self.kinematic_side is None else {KINEMATIC_TITLE + SIDE: self.kinematic_side}
+        return {FIT_TITLE: self.fit, KINEMATIC_TITLE: self.kinematic, **side}
+
+
+def fingerprint(dataset: DatasetParams, params: TileParams) -> Mapping[str, object]:
+    """The ground truth's files when the scan may be coloured by its error (an edited or
+    added truth renders the tiles again); nothing for plain skin."""
+    from physanim.evaluate.truth import truth_fingerprint
+
+    return {} if params.scan_colour == "skin" else truth_fingerprint(dataset.path, params.truth)
 
 
 def compute(
     params: TileParams, align: AlignOutput, dense: DenseOutput, ctx: StageContext[TileParams]
 ) -> TilesOutput:
-    """The fit and captured-scan tiles at every ``params.every_frames``-th frame."""
-    from physanim.render.face_panel import motion_tiles
+    """The fit and captured-scan tiles at every ``params.every_frames``-th frame; the scan
+    coloured by its error (mm) where ``params.scan_colour`` asks and the truth is there."""
+    from physanim.evaluate.truth import load_truth
+    from physanim.render.face_panel import motion_tiles, scan_error_mm, select_frames
 
+    truth_path = ctx.dataset_dir / params.truth
+    if params.scan_colour == "error" and not truth_path.exists():
+        raise ValueError(f"render.scan_colour is 'error', but there is no truth {truth_path}")
+    n_frames = align.motion.shape[0]
+    frames = params.frames(n_frames)
+    captured = select_frames(dense.motion, frames)
+    error, summary = None, {"scan_colour": "skin"}
+    if params.scan_colour != "skin" and truth_path.exists():
+        truth = load_truth(truth_path, n_frames)
+        at_frames = replace(truth, vertices=truth.vertices[frames])
+        error = scan_error_mm(align.scan_vertices, captured, at_frames)
+        summary = {
+            "scan_colour": "error",
+            "scan_error_mm": {
+                "median": round(float(np.median(error)), 3),
+                "p95": round(float(np.percentile(error, 95)), 3),
+                "max": round(float(error.max()), 3),
+            },
+        }
     tiles = motion_tiles(
-        align.motion, align.triangles, dense.motion, align.scan_vertices, align.scan_faces,
-        params, ctx.progress,
+        align.motion[frames], align.triangles, captured, align.scan_vertices, align.scan_faces,
+        params, ctx.progress, error,
     )  # fmt: skip
-    frames = params.frames(align.motion.shape[0])
-    return TilesOutput(frames, tiles[FIT_TITLE], tiles[KINEMATIC_TITLE])
+    side = tiles.get(KINEMATIC_TITLE + SIDE)
+    return TilesOutput(frames, tiles[FIT_TITLE], tiles[KINEMATIC_TITLE], side, summary=summary)
 
 
 SPEC = StageSpec.typed(
     "tiles",
     compute,
-    version="2",
-    doc="panel tiles of the model fit and the kinematic scan (render's tile settings)",
+    version="3",
+    doc="panel tiles of the model fit and the captured scan, front and side, the scan "
+    "optionally coloured by its error against the truth (render's tile settings)",
+    fingerprint=fingerprint,
     section="render",
 )

@@ -41,6 +41,19 @@ class Truth:
         return out
 
 
+def truth_fingerprint(dataset_dir: Path, name: str) -> dict[str, object]:
+    """``{"truth": ...}``: the size and modification time of every file of the ground truth
+    ``dataset_dir / name``, or "none" where there is none (a stage key input: an edited or
+    added truth re-runs the stages that read it)."""
+    from physanim.store import files_fingerprint
+
+    truth = dataset_dir / name
+    if not truth.exists():
+        return {"truth": "none"}
+    files = [p for p in truth.rglob("*") if p.is_file()] if truth.is_dir() else [truth]
+    return {"truth": files_fingerprint(files, dataset_dir)}
+
+
 def load_truth(path: Path, n_frames: int) -> Truth:
     """The first ``n_frames`` of the ground truth at ``path``; ValueError names what is
     missing or too short."""

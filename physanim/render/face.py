@@ -10,10 +10,12 @@ Two backends give the same framing (same camera model, same colour mapping, same
 Modules: :mod:`.camera` (camera model, frontal framing, turntable), :mod:`.colours` (skin,
 colour maps, colour bar), :mod:`.surface` (one renderer over both backends:
 :mod:`.vtk_backend`, :mod:`.raster_backend`), :mod:`.isolated` (VTK in a worker process).
-This module renders sequences. ``render_sequence`` with ``isolate=True`` (default) renders
-with VTK in a separate Python process; if that worker dies or fails, ``backend="auto"``
-re-renders the sequence with the numpy backend and warns. ``render_surface`` and
-``SurfaceRenderer`` (:mod:`.surface`) render in-process (single images and tests).
+This module renders sequences: ``render_sequence`` from one camera, ``render_views`` from
+several (e.g. the front and the side, each frame shaded and uploaded once for all of them).
+With ``isolate=True`` (default) they render with VTK in a separate Python process; if that
+worker dies or fails, ``backend="auto"`` re-renders the sequence with the numpy backend and
+warns. ``render_surface`` and ``SurfaceRenderer`` (:mod:`.surface`) render in-process (single
+images and tests).
 
 Frames: actor frame (+x actor's left, +y up, +z out of the face), so the frontal camera sits
 on +z and the actor's left appears on the image's right, as in a photograph.
@@ -71,6 +73,33 @@ def render_sequence(
     ``backend``: "vtk", "numpy" or "auto" (vtk, falling back to numpy if VTK fails);
     ``isolate`` runs VTK in a separate Python process (see the module docstring).
     """
+    return render_views(
+        vertices, faces, (0.0,), scalars=scalars, colour_map=colour_map, camera=camera,
+        azimuth_deg=azimuth_deg, size=size, colour=colour, backend=backend, isolate=isolate,
+        progress=progress,
+    )[0]  # fmt: skip
+
+
+def render_views(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    views_deg: Sequence[float],
+    *,
+    scalars: np.ndarray | None = None,
+    colour_map: ColourMap | None = None,
+    camera: Camera | None = None,
+    azimuth_deg: np.ndarray | Sequence[float] | None = None,
+    size: tuple[int, int] = (480, 640),
+    colour: tuple[float, float, float] = SKIN,
+    backend: Backend = "auto",
+    isolate: bool = True,
+    progress: Callable[[int, int], None] | None = None,
+) -> np.ndarray:
+    """An animated mesh seen from each of ``views_deg`` (V,) camera azimuths, degrees (e.g.
+    0 frontal, 70 three-quarter towards the actor's left; added to the turntable's): (V, T,
+    H, W, 3) uint8, by one renderer (one worker process) that shades each frame once for all
+    its views; ``progress`` counts the V * T images. The other arguments as in
+    :func:`render_sequence`."""
     vertices = np.asarray(vertices, dtype=np.float64)
     if vertices.ndim != 3 or vertices.shape[2] != 3:
         raise ValueError(f"vertices must be (T, N, 3) metres, got shape {vertices.shape}")
@@ -81,13 +110,10 @@ def render_sequence(
     if per_frame is not None and colour_map is None:
         colour_map = ColourMap.spanning(per_frame)
     base = camera or frontal_camera(vertices[0], size, bar=colour_map is not None)
-    if azimuth_deg is None:
-        cameras = [base] * n_frames
-    else:
-        az = np.asarray(azimuth_deg, dtype=np.float64)
-        if az.shape != (n_frames,):
-            raise ValueError(f"azimuth_deg must be ({n_frames},) degrees, got shape {az.shape}")
-        cameras = [turntable(base, a) for a in az]
+    az = np.zeros(n_frames) if azimuth_deg is None else np.asarray(azimuth_deg, dtype=np.float64)
+    if az.shape != (n_frames,):
+        raise ValueError(f"azimuth_deg must be ({n_frames},) degrees, got shape {az.shape}")
+    cameras = [[turntable(base, a + v) for a in az] for v in views_deg]
     settings = dict(size=size, colour_map=colour_map, colour=colour)
     if backend in ("auto", "vtk") and isolate:
         try:
@@ -97,6 +123,6 @@ def render_sequence(
                 raise
             warnings.warn(f"{exc}; using the numpy rasteriser", RuntimeWarning, stacklevel=2)
             backend = "numpy"
-    out = np.empty((n_frames, size[1], size[0], 3), dtype=np.uint8)
+    out = np.empty((len(views_deg), n_frames, size[1], size[0], 3), dtype=np.uint8)
     render_frames(out, vertices, faces, per_frame, cameras, settings, backend, progress)
     return out

@@ -1,9 +1,11 @@
-"""The face run's panel video: capture | model fit | kinematic scan | FEM, side by side.
+"""The face run's panel video: capture | model fit | captured scan | FEM | side views.
 
 Per rendered frame: the captured colour frame cropped to the face with the tracked landmarks,
-the CANDIDE-style fit, the kinematic (bound) scan and the FEM skin (the high-res scan
-embedded in the tets) coloured by displacement; the panels as PNGs and an MP4 at the
-capture frame rate (divided by the frame stride).
+the CANDIDE-style fit, the captured scan (plain skin, or coloured by its error against the
+dataset's ground truth) and the FEM skin (the high-res scan embedded in the tets) coloured by
+displacement, all seen from the front; then the captured scan and the FEM skin seen from the
+side (``side_view_deg``), where motion towards the camera (a pucker, a cheek puff) shows. The
+panels as PNGs and an MP4 at the capture frame rate (divided by the frame stride).
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from collections.abc import Collection, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,8 +24,16 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from physanim.mesh.seam import MouthLine
 from physanim.pipeline import ProgressFactory, ProgressFn
 
-#: Panel titles of the fit and kinematic-scan tiles (the capture's comes first, the FEM's last).
-FIT_TITLE, KINEMATIC_TITLE = "CANDIDE-style fit", "captured scan"
+if TYPE_CHECKING:
+    from physanim.evaluate.truth import Truth
+    from physanim.render.colours import ColourMap
+
+#: Panel titles of the frontal 3D tiles, in panel order (the capture's comes first).
+FIT_TITLE, KINEMATIC_TITLE, FEM_TITLE = "CANDIDE-style fit", "captured scan", "FEM"
+#: What a side view's title adds to its frontal tile's title.
+SIDE = " (side)"
+#: Colour-bar label of the captured scan's error.
+ERROR_LABEL = "error vs truth (mm)"
 
 
 class TileParams(BaseModel):
@@ -34,6 +44,25 @@ class TileParams(BaseModel):
     tile_height_px: int = Field(640, ge=64, le=4096, description="height of each tile, px")
     every_frames: int = Field(1, ge=1, le=1000, description="render every n-th frame")
     turntable: bool = Field(False, description="turn the 3D tiles once around over the video")
+    side_view_deg: float = Field(
+        70.0, ge=0.0, le=90.0,
+        description="side tiles of the captured scan and the FEM skin: their camera turned this "
+        "far from the front towards the actor's left, deg (90: profile; 0: no side tiles)",
+    )  # fmt: skip
+    scan_colour: Literal["skin", "error", "auto"] = Field(
+        "auto",
+        description="captured-scan tiles: 'skin', 'error' (per vertex, the distance of its "
+        "displacement to the ground truth's, mm; the dataset must have a truth) or 'auto' "
+        "(error where the dataset has a truth, else skin)",
+    )
+    truth: str = Field(
+        "ground_truth.zarr", description="ground truth in the dataset (as evaluate's), if any"
+    )
+    error_max_mm: float = Field(
+        0.0, ge=0.0, le=100.0,
+        description="error colour-bar top, mm (0: the 99th percentile of the rendered frames' "
+        "errors; larger ones show in the top colour)",
+    )  # fmt: skip
 
     def frames(self, n_frames: int) -> NDArray:
         """(R,) the frame indices rendered of ``n_frames``."""
@@ -49,6 +78,21 @@ class TileParams(BaseModel):
         if not self.turntable:
             return None
         return np.linspace(0.0, 360.0, n_rendered, endpoint=False)
+
+    @property
+    def views_deg(self) -> tuple[float, ...]:
+        """Camera azimuths, deg, of the captured scan's and the FEM's tiles: the front, then
+        the side view if any."""
+        return (0.0, self.side_view_deg) if self.side_view_deg else (0.0,)
+
+    def error_colours(self, error_mm: NDArray) -> ColourMap:
+        """The colour map of the captured scan's ``error_mm`` (R, N): from 0 to
+        ``error_max_mm`` or their 99th percentile (a few wild vertices at the scan's edge
+        would leave the rest of the face in the bottom colour)."""
+        from physanim.render.colours import ColourMap
+
+        top = self.error_max_mm or max(float(np.percentile(error_mm, 99)), 1e-3)
+        return ColourMap(ERROR_LABEL, clim=(0.0, top), cmap="BuPu")
 
 
 class PanelParams(TileParams):
@@ -77,9 +121,9 @@ class FaceFootage:
     ``colour`` (T, H, W, 3) uint8 RGB capture (lazy); ``uv`` (T, K, 2) px tracked landmarks
     (NaN: unseen), ``confidence`` (T, K) in [0, 1]; ``fps`` frames/s of the capture;
     ``motion_tiles`` title -> (R, H, W, 3) uint8 tiles of the rendered frames already
-    rendered (:func:`motion_tiles`); ``scan_vertices`` (N, 3) m, ``scan_faces`` (F, 3),
-    ``scan_side`` (N,) lip sides; ``nodes`` (n, 3) m, ``tets`` (M, 4), ``mouth`` the lip
-    seam; ``displacements`` (T, n, 3) m of the FEM nodes.
+    rendered (:func:`motion_tiles`, side views included); ``scan_vertices`` (N, 3) m,
+    ``scan_faces`` (F, 3), ``scan_side`` (N,) lip sides; ``nodes`` (n, 3) m, ``tets`` (M,
+    4), ``mouth`` the lip seam; ``displacements`` (T, n, 3) m of the FEM nodes.
     """
 
     colour: Any
@@ -119,14 +163,16 @@ def render_face_panel(
     ``folder``: ``panel.mp4`` and, as ``params.png_frames`` asks, ``frames/<frame>.png``
     (``peaks``: the frames 'peaks' keeps). The FEM tiles render in a worker process while this
     one crops the capture (``embeddings``: the folder caching the scan's embedding in the
-    tets); the fit and kinematic tiles come rendered (``motion_tiles``)."""
+    tets); the fit and captured-scan tiles come rendered (``motion_tiles``). Panel order: the
+    capture, the frontal tiles, then the side views."""
     frames = params.frames(footage.displacements.shape[0])
     t0 = time.perf_counter()
     with ThreadPoolExecutor(1) as pool:
         fem = pool.submit(fem_tiles, footage, frames, params, embeddings, progress("render FEM"))
         captured = capture_tiles(footage, frames, params.size)
-        rendered = {**footage.motion_tiles, "FEM": fem.result()}
+        tiles = {**footage.motion_tiles, **_titled(FEM_TITLE, fem.result())}
     render_s = time.perf_counter() - t0
+    rendered = {t: tiles[t] for t in sorted(tiles, key=lambda t: t.endswith(SIDE))}
     panels = compose_panels(footage, frames, captured, rendered)
     keep = {"all": frames, "none": (), "peaks": peaks}[params.png_frames]
     fps = footage.fps / params.every_frames
@@ -137,38 +183,52 @@ def render_face_panel(
 def motion_tiles(
     fit_motion: NDArray,
     fit_triangles: NDArray,
-    kinematic: Any,
+    captured: NDArray,
     scan_vertices: NDArray,
     scan_faces: NDArray,
     params: TileParams,
     progress: ProgressFactory,
+    error_mm: NDArray | None = None,
 ) -> dict[str, NDArray]:
-    """Title -> (R, H, W, 3) uint8 tiles of the fitted motion mesh (``fit_motion`` (T, V, 3)
-    m, ``fit_triangles``) and of the kinematic scan (``kinematic`` (T, N, 3) m, numpy or Zarr,
-    on ``scan_faces``) at the frames ``params`` selects, each rendered in its own worker
-    process, by the camera of the FEM tiles (framed on ``scan_vertices`` (N, 3) m)."""
-    from physanim.render.face import render_sequence
+    """Title -> (R, H, W, 3) uint8 tiles of R rendered frames of the fitted motion mesh
+    (``fit_motion`` (R, V, 3) m, ``fit_triangles``) and of the captured scan (``captured``
+    (R, N, 3) m on ``scan_faces``; from the front and the side, ``params.views_deg``), each
+    mesh rendered in its own worker process, by the cameras of the FEM tiles (framed on
+    ``scan_vertices`` (N, 3) m). ``error_mm`` (R, N): the scan's error, mm, coloured with a
+    colour bar (None: plain skin)."""
+    from physanim.render.face import render_views
 
-    frames = params.frames(fit_motion.shape[0])
-    camera = _camera(scan_vertices, params)
+    scan_colours = {} if error_mm is None else dict(
+        scalars=error_mm, colour_map=params.error_colours(error_mm)
+    )  # fmt: skip
     jobs = {
         FIT_TITLE: dict(
-            vertices=fit_motion[frames], faces=fit_triangles, progress=progress("render fit")
+            vertices=fit_motion, faces=fit_triangles, views_deg=(0.0,),
+            progress=progress("render fit"),
         ),
         KINEMATIC_TITLE: dict(
-            vertices=_frames(kinematic, frames), faces=scan_faces,
-            progress=progress("render kinematic"),
+            vertices=captured, faces=scan_faces, views_deg=params.views_deg,
+            progress=progress("render captured scan"), **scan_colours,
         ),
     }  # fmt: skip
-    azimuth = params.azimuth(len(frames))
+    look = dict(
+        camera=_camera(scan_vertices, params), size=params.size,
+        azimuth_deg=params.azimuth(len(captured)),
+    )  # fmt: skip
     with ThreadPoolExecutor(len(jobs)) as pool:
-        futures = {
-            name: pool.submit(
-                render_sequence, **job, camera=camera, size=params.size, azimuth_deg=azimuth
-            )
-            for name, job in jobs.items()
-        }
-        return {name: f.result() for name, f in futures.items()}
+        futures = {name: pool.submit(render_views, **job, **look) for name, job in jobs.items()}
+        return {k: v for name, f in futures.items() for k, v in _titled(name, f.result()).items()}
+
+
+def scan_error_mm(scan_vertices: NDArray, captured: NDArray, truth: Truth) -> NDArray:
+    """(R, N) mm per scan vertex and frame: the distance between its captured displacement
+    (``captured`` (R, N, 3) m minus ``scan_vertices`` (N, 3) m) and its true one (the truth's
+    surface point closest to it at the first frame, followed; ``truth`` the same R frames,
+    the first the neutral one)."""
+    from physanim.evaluate.fidelity import follow_truth
+
+    true = follow_truth(scan_vertices, truth.vertices, truth.faces).displacement
+    return 1e3 * np.linalg.norm(captured - scan_vertices - true, axis=-1)
 
 
 def fem_tiles(
@@ -178,12 +238,13 @@ def fem_tiles(
     embeddings: Path,
     progress: ProgressFn,
 ) -> NDArray:
-    """(R, H, W, 3) uint8 tiles of the FEM skin at ``frames`` (R,): the high-res scan embedded
-    in the tets, moved by their displacement and coloured by it (mm, with a colour bar); the
-    embedding is kept in the folder ``embeddings`` by the content of its inputs."""
+    """(V, R, H, W, 3) uint8 tiles of the FEM skin at ``frames`` (R,) from each of
+    ``params.views_deg`` (V,): the high-res scan embedded in the tets, moved by their
+    displacement and coloured by it (mm, with a colour bar); the embedding is kept in the
+    folder ``embeddings`` by the content of its inputs."""
     from physanim.mesh.embed import embedded_displacements
     from physanim.render.colours import ColourMap
-    from physanim.render.face import render_sequence
+    from physanim.render.face import render_views
     from physanim.store.file_cache import FileCache
 
     scan_v = footage.scan_vertices
@@ -193,15 +254,22 @@ def fem_tiles(
     )  # fmt: skip
     magnitude_mm = np.linalg.norm(disp, axis=-1) * 1e3
     top = params.displacement_max_mm or max(float(magnitude_mm.max()), 1e-3)
-    return render_sequence(
-        scan_v[None] + disp, footage.scan_faces, scalars=magnitude_mm,
+    return render_views(
+        scan_v[None] + disp, footage.scan_faces, params.views_deg, scalars=magnitude_mm,
         colour_map=ColourMap("displacement (mm)", clim=(0.0, top)), progress=progress,
         camera=_camera(scan_v, params), size=params.size, azimuth_deg=params.azimuth(len(frames)),
     )  # fmt: skip
 
 
+def _titled(title: str, views: NDArray) -> dict[str, NDArray]:
+    """Panel title -> tiles of ``views`` (V, R, H, W, 3): the front's ``title``, the side's
+    marked ``SIDE``."""
+    return {title: views[0], **({title + SIDE: views[1]} if len(views) > 1 else {})}
+
+
 def _camera(scan_vertices: NDArray, params: TileParams) -> Any:
-    """The frontal camera of every 3D tile, framed on the scan (room for the colour bar)."""
+    """The frontal camera of every 3D tile, framed on the scan (room for the colour bar); the
+    side views turn it about its view-up axis."""
     from physanim.render.camera import frontal_camera
 
     return frontal_camera(scan_vertices, params.size, bar=True)
@@ -213,7 +281,7 @@ def capture_tiles(footage: FaceFootage, frames: NDArray, size: tuple[int, int]) 
     from physanim.render.crop import face_crop
     from physanim.render.panel import draw_landmarks
 
-    colour = _frames(footage.colour, frames)
+    colour = select_frames(footage.colour, frames)
     uv, conf = footage.uv[frames], footage.confidence[frames]
     box = face_crop(uv, colour.shape[1:3], size)
     offset = np.array([box[2], box[0]])
@@ -268,7 +336,7 @@ def write_panels(
     return video, codec
 
 
-def _frames(array: Any, frames: NDArray) -> NDArray:
+def select_frames(array: Any, frames: NDArray) -> NDArray:
     """``array[frames]`` of a numpy or Zarr array, frames first."""
     if isinstance(array, np.ndarray):
         return array[frames]

@@ -12,7 +12,8 @@ matplotlib, pyvista and the renderer's modules; no ``__main__`` guard needed in 
 if that worker dies or fails, ``backend="auto"`` re-renders with the numpy backend and warns.
 
 Protocol: the inputs go in an .npz (arrays and a JSON ``meta``), the frames come back in a
-memory-mapped .npy, and the worker prints one ``@physanim-frame K`` line per frame rendered.
+memory-mapped .npy, and the worker prints one ``@physanim-frame K`` line per frame rendered
+(K: the images done, all views of the frames so far).
 """
 
 from __future__ import annotations
@@ -36,9 +37,11 @@ _PROGRESS_TAG = "@physanim-frame "
 
 
 def render_isolated(vertices, faces, per_frame, cameras, settings, progress) -> np.ndarray:
-    """Run ``python -m physanim.render.isolated`` on the frames (inputs in an .npz, output in a
+    """Run ``python -m physanim.render.isolated`` on the images (arguments as in
+    :func:`.surface.render_frames`; inputs in an .npz, output (V, T, H, W, 3) in a
     memory-mapped .npy); raises RuntimeError if the worker fails or dies."""
-    n_frames = len(vertices)
+    n_views, n_frames = len(cameras), len(vertices)
+    n_images = n_views * n_frames
     width, height = settings["size"]
     with tempfile.TemporaryDirectory(prefix=f"physanim-render-{os.getpid()}-") as tmp:
         job, result = Path(tmp) / "job.npz", Path(tmp) / "frames.npy"
@@ -49,7 +52,10 @@ def render_isolated(vertices, faces, per_frame, cameras, settings, progress) -> 
             faces=faces,
             scalars=np.zeros((0,)) if per_frame is None else per_frame,
             cameras=np.array(
-                [[*c.position, *c.focal_point, *c.view_up, c.view_angle] for c in cameras]
+                [
+                    [[*c.position, *c.focal_point, *c.view_up, c.view_angle] for c in v]
+                    for v in cameras
+                ]
             ),
             meta=json.dumps(
                 {
@@ -60,7 +66,7 @@ def render_isolated(vertices, faces, per_frame, cameras, settings, progress) -> 
             ),
         )
         out = np.lib.format.open_memmap(
-            result, mode="w+", dtype=np.uint8, shape=(n_frames, height, width, 3)
+            result, mode="w+", dtype=np.uint8, shape=(n_views, n_frames, height, width, 3)
         )
         del out
         env = dict(os.environ)
@@ -78,13 +84,13 @@ def render_isolated(vertices, faces, per_frame, cameras, settings, progress) -> 
                 if line.startswith(_PROGRESS_TAG):
                     done = int(line[len(_PROGRESS_TAG) :])
                     if progress is not None:
-                        progress(done, n_frames)
+                        progress(done, n_images)
             err = proc.stderr.read()
-        if proc.returncode != 0 or done != n_frames:
+        if proc.returncode != 0 or done != n_images:
             tail = "\n".join(re.sub(r"\x1b\[[0-9;]*m", "", err).strip().splitlines()[-3:])
             raise RuntimeError(
-                f"VTK render worker exited with code {proc.returncode} after {done}/{n_frames} "
-                f"frames: {tail}"
+                f"VTK render worker exited with code {proc.returncode} after {done}/{n_images} "
+                f"images: {tail}"
             )
         return np.load(result)
 
@@ -102,8 +108,10 @@ def _worker_main(job: str, result: str) -> None:
             cmap=cmap["cmap"],
             categories=None if cats is None else tuple(cats),
         )
-    cams = data["cameras"]
-    cameras = [Camera(tuple(c[0:3]), tuple(c[3:6]), tuple(c[6:9]), float(c[9])) for c in cams]
+    cameras = [
+        [Camera(tuple(c[0:3]), tuple(c[3:6]), tuple(c[6:9]), float(c[9])) for c in view]
+        for view in data["cameras"]
+    ]
     scalars = data["scalars"] if cmap is not None else None
     settings = dict(size=tuple(meta["size"]), colour_map=cmap, colour=tuple(meta["colour"]))
     out = np.load(result, mmap_mode="r+")

@@ -6,6 +6,7 @@ colour mapping, same bar): ``"vtk"`` (:mod:`.vtk_backend`) or ``"numpy"``
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Literal
 
 import numpy as np
@@ -86,6 +87,13 @@ class SurfaceRenderer:
     ) -> np.ndarray:
         """(H, W, 3) uint8 image of the mesh at ``vertices`` (N, 3) m; ``scalars`` (N,) or
         (M,) in the colour map's unit (required iff the renderer has a colour map)."""
+        return self.render_views(vertices, [camera], scalars)[0]
+
+    def render_views(
+        self, vertices: np.ndarray, cameras: Sequence[Camera], scalars: np.ndarray | None = None
+    ) -> list[np.ndarray]:
+        """One (H, W, 3) uint8 image per camera of the mesh at ``vertices`` (N, 3) m, shaded
+        and uploaded once; ``scalars`` as in :meth:`render`."""
         vertices = np.asarray(vertices, dtype=np.float64)
         check_mesh(vertices, self.faces)
         if len(vertices) != self.n_vertices:
@@ -99,12 +107,15 @@ class SurfaceRenderer:
             rgb = self.colour_map.colours(scalars)
         normals = vertex_normals(vertices, self.faces)
         if self._vtk is not None:
-            view = self._vtk.render(vertices, normals, rgb, site, camera)
+            views = self._vtk.render(vertices, normals, rgb, site, cameras)
         else:
-            view = render_numpy(
-                vertices, normals, self.faces, rgb, site, camera, self.view_size, self.colour
-            )
-        return view if self.bar is None else np.concatenate([view, self.bar], axis=0)
+            views = [
+                render_numpy(
+                    vertices, normals, self.faces, rgb, site, c, self.view_size, self.colour
+                )
+                for c in cameras
+            ]
+        return [v if self.bar is None else np.concatenate([v, self.bar], axis=0) for v in views]
 
 
 def render_surface(
@@ -133,11 +144,15 @@ def render_surface(
 
 
 def render_frames(out, vertices, faces, per_frame, cameras, settings, backend, progress) -> None:
-    """Render every frame into ``out`` (T, H, W, 3) uint8 with one renderer."""
+    """Render frame t of ``vertices`` (T, N, 3) m (and of the ``per_frame`` scalars) seen by
+    ``cameras[v][t]`` into ``out[v, t]`` ((V, T, H, W, 3) uint8) with one renderer."""
     chosen = "vtk" if backend == "auto" else backend
+    n_views, n_frames = len(cameras), len(vertices)
     with SurfaceRenderer(faces, vertices.shape[1], **settings, backend=chosen) as renderer:
-        for t in range(len(vertices)):
+        for t in range(n_frames):
             s = None if per_frame is None else per_frame[t]
-            out[t] = renderer.render(vertices[t], cameras[t], s)
+            views = renderer.render_views(vertices[t], [c[t] for c in cameras], s)
+            for v, image in enumerate(views):
+                out[v, t] = image
             if progress is not None:
-                progress(t + 1, len(vertices))
+                progress((t + 1) * n_views, n_views * n_frames)

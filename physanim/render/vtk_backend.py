@@ -5,6 +5,8 @@ updated in place. A VTK crash kills its process: sequences run it isolated
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from physanim.render.camera import Camera
@@ -32,9 +34,10 @@ class VtkView:
         normals: np.ndarray,
         rgb: np.ndarray | None,
         site: str,
-        camera: Camera,
-    ) -> np.ndarray:
-        """(H, W, 3) uint8 view; arguments as in :func:`.raster_backend.render_numpy`."""
+        cameras: Sequence[Camera],
+    ) -> list[np.ndarray]:
+        """(H, W, 3) uint8 views of the mesh, one per camera (the mesh uploaded once);
+        arguments as in :func:`.raster_backend.render_numpy`."""
         import pyvista as pv
 
         if self._plotter is None:
@@ -60,6 +63,10 @@ class VtkView:
         if rgb is not None:
             (mesh.point_data if site == "point" else mesh.cell_data)["rgb"][:] = rgb
         mesh.Modified()
+        return [self._shoot(camera) for camera in cameras]
+
+    def _shoot(self, camera: Camera) -> np.ndarray:
+        """(H, W, 3) uint8: the current mesh seen by ``camera``."""
         cam = self._plotter.camera
         cam.position, cam.focal_point, cam.up = camera.position, camera.focal_point, camera.view_up
         cam.view_angle = camera.view_angle

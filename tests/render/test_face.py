@@ -8,7 +8,7 @@ from matplotlib import colormaps
 
 from physanim.render.camera import frontal_camera, turntable
 from physanim.render.colours import BACKGROUND, BAR_HEIGHT, ColourMap
-from physanim.render.face import render_sequence
+from physanim.render.face import render_sequence, render_views
 from physanim.render.surface import render_surface
 
 SIZE = (240, 320)  # (W, H) px
@@ -119,6 +119,22 @@ def test_sequence_isolated_matches_in_process(actor):
     assert np.abs(isolated.astype(int) - local).mean() < 1.0
     # Frames differ: the turntable moves and the colour goes from pale to red.
     assert np.abs(isolated[0].astype(int) - isolated[-1]).mean() > 5
+
+
+def test_views_are_the_sequence_seen_turned(actor):
+    """``render_views`` (one worker, each frame uploaded once for both cameras) gives, per
+    view, the frames ``render_sequence`` renders turned by that azimuth, in frame order."""
+    lift = np.array([0.0, 0.006])
+    seq = actor.vertices[None] + lift[:, None, None] * np.array([0.0, 0.0, 1.0])
+    views = render_views(seq, actor.faces, (0.0, 90.0), size=SIZE, backend="vtk")
+    assert views.shape == (2, 2, SIZE[1], SIZE[0], 3)
+    for got, azimuth in zip(views, (0.0, 90.0), strict=True):
+        alone = render_sequence(
+            seq, actor.faces, azimuth_deg=[azimuth] * 2, size=SIZE, backend="vtk", isolate=False
+        )
+        assert np.abs(got.astype(int) - alone).mean() < 1.0
+    assert np.abs(views[0, 1].astype(int) - views[1, 1]).mean() > 5  # front and profile differ
+    assert np.abs(views[1, 0].astype(int) - views[1, 1]).mean() > 0.5  # the lift shows
 
 
 def test_bad_inputs_are_named(actor):
