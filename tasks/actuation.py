@@ -151,7 +151,7 @@ def compute(
     fit = fit_actuation(
         model, basis, conditions, binding.nodes, targets, weights,
         fit_params.stress_cost_mm_per_kPa * 1e-6, fit_params.rate_cost_mm_per_kPa * 1e-6,
-        params.solver,
+        params.solver, fit_params.robust_mm * 1e-3,
     )  # fmt: skip
     report(3, 3)
 

@@ -170,11 +170,19 @@ class ActuationParams(BaseModel):
         "centre, m; each patch reaches twice as far (5 deviatoric stress coefficients a patch)",
     )
     stress_cost_mm_per_kPa: float = Field(
-        0.003,
+        0.0015,
         gt=0.0,
         le=10.0,
         description="regularisation: an RMS active stress of 1 kPa over the tissue costs as "
         "much as an RMS skin misfit of this many mm (larger: smaller stresses, looser fit)",
+    )
+    robust_mm: float = Field(
+        0.5,
+        ge=0.0,
+        le=10.0,
+        description="Huber scale of each skin node's misfit, mm: beyond it the misfit counts "
+        "linearly, not squared, so motion the skull and jaw conditions contradict does not call "
+        "for extreme stresses (0: plain least squares)",
     )
     rate_cost_mm_per_kPa: float = Field(
         0.003,

@@ -48,6 +48,8 @@ from physanim.fem.statics import free_dofs
 
 #: right-hand sides per multi-RHS solve (bounds the memory of the solves, n_u x this)
 SOLVE_BLOCK = 128
+#: reweightings of the robust (Huber) fit
+ROBUST_ROUNDS = 3
 
 
 @dataclass(frozen=True)
@@ -55,7 +57,7 @@ class ActuationFit:
     """The inverse step's answer for T frames and S observed nodes: ``coefficients``
     (T, P, 5) Pa; the static FEM's displacements of the observed nodes with them,
     ``fitted`` (T, S, 3) m, and without actuation (the conditions alone), ``passive``
-    (T, S, 3) m; conjugate-gradient ``iterations``; ``seconds`` per step."""
+    (T, S, 3) m; conjugate-gradient ``iterations`` (all rounds); ``seconds`` per step."""
 
     coefficients: NDArray
     fitted: NDArray
@@ -108,6 +110,76 @@ def _difference_laplacian(n: int) -> NDArray:
     return D.T @ D
 
 
+def _normalised(weights: NDArray) -> NDArray:
+    """Weights (T, S) / their sum per frame, repeated over x, y, z: (T, 3S)."""
+    total = weights.sum(axis=1, keepdims=True)
+    share = np.divide(weights, total, out=np.zeros_like(weights), where=total > 0)
+    return np.repeat(share, 3, axis=1)
+
+
+class LeastSquares:
+    """The normal equations of the module docstring's objective for responses R (3S, n) m/Pa
+    over T frames, ``volume_share`` (n,) v of each coefficient's patch, ``stress_cost`` and
+    ``rate_cost`` m/Pa; preconditioned by their exact solution for the per-frame weights
+    ``mean_weights`` (S,) used in every frame (diagonal in the eigenvectors Q of
+    v^-1/2 H v^-1/2 and P of the first-difference Laplacian)."""
+
+    def __init__(
+        self,
+        R: NDArray,
+        volume_share: NDArray,
+        stress_cost: float,
+        rate_cost: float,
+        mean_weights: NDArray,
+        n_frames: int,
+    ) -> None:
+        self.R, self.v = R, np.asarray(volume_share, dtype=np.float64)
+        self.lam, self.mu = stress_cost**2, rate_cost**2
+        self.lap = _difference_laplacian(n_frames)
+        self.s = 1.0 / np.sqrt(self.v)
+        hbar = (R * _normalised(mean_weights[None])[0][:, None]).T @ R
+        eig_h, self.Q = np.linalg.eigh(self.s[:, None] * hbar * self.s[None, :])
+        eig_l, self.P = np.linalg.eigh(self.lap)
+        self.denom = np.maximum(eig_h, 0.0)[:, None] + self.lam + self.mu * eig_l[None, :]
+
+    def _precondition(self, r: NDArray) -> NDArray:
+        s, Q, P = self.s[:, None], self.Q, self.P
+        return s * (Q @ ((Q.T @ (s * r) @ P) / self.denom) @ P.T)
+
+    def solve(
+        self,
+        residual_targets: NDArray,
+        weights: NDArray,
+        start: NDArray | None = None,
+        rtol: float = 1e-6,
+        max_iter: int = 500,
+    ) -> tuple[NDArray, int]:
+        """The minimiser a (T, n) for targets minus passive motion ``residual_targets``
+        (T, 3S) m and ``weights`` (T, S) >= 0, by conjugate gradients from ``start`` (T, n)
+        (default: the preconditioned guess); and the iterations taken."""
+        R, v, w = self.R, self.v[:, None], _normalised(weights)
+
+        def apply(a: NDArray) -> NDArray:  # a (n, T) -> the normal equations' matrix times a
+            return R.T @ (w.T * (R @ a)) + v * (self.lam * a + self.mu * (a @ self.lap))
+
+        b = R.T @ (w * residual_targets).T  # (n, T)
+        a = self._precondition(b) if start is None else start.T.copy()
+        r = b - apply(a)
+        z = self._precondition(r)
+        p, rz = z.copy(), float((r * z).sum())
+        norm_b, it = float(np.linalg.norm(b)), 0
+        while np.linalg.norm(r) > rtol * norm_b and it < max_iter:
+            q = apply(p)
+            alpha = rz / float((p * q).sum())
+            a += alpha * p
+            r -= alpha * q
+            z = self._precondition(r)
+            rz, rz_old = float((r * z).sum()), rz
+            p = z + (rz / rz_old) * p
+            it += 1
+        return a.T, it
+
+
 def solve_coefficients(
     R: NDArray,
     residual_targets: NDArray,
@@ -115,50 +187,11 @@ def solve_coefficients(
     volume_share: NDArray,
     stress_cost: float,
     rate_cost: float,
-    rtol: float = 1e-6,
-    max_iter: int = 500,
 ) -> tuple[NDArray, int]:
-    """Minimiser a (T, n) of the module docstring's objective for responses R (3S, n) m/Pa,
-    targets minus passive motion ``residual_targets`` (T, 3S) m, ``weights`` (T, S) >= 0 and
-    ``volume_share`` (n,) v of each coefficient's patch; ``stress_cost`` and ``rate_cost``
-    m/Pa. Returns it and the conjugate-gradient iterations after the preconditioned guess."""
-    n_frames = len(weights)
-    total = weights.sum(axis=1, keepdims=True)
-    w = np.repeat(np.divide(weights, total, out=np.zeros_like(weights), where=total > 0), 3, 1)
-    lam, mu = stress_cost**2, rate_cost**2
-    lap = _difference_laplacian(n_frames)
-    v = np.asarray(volume_share, dtype=np.float64)
-
-    def apply(a: NDArray) -> NDArray:  # a (n, T) -> the normal equations' matrix times a
-        return R.T @ (w.T * (R @ a)) + v[:, None] * (lam * a + mu * (a @ lap))
-
-    # exact for the frame-mean weights, diagonal in (Q, P): the preconditioner
-    s = 1.0 / np.sqrt(v)
-    hbar = (R * w.mean(axis=0)[:, None]).T @ R
-    eig_h, Q = np.linalg.eigh(s[:, None] * hbar * s[None, :])
-    eig_l, P = np.linalg.eigh(lap)
-    denom = np.maximum(eig_h, 0.0)[:, None] + lam + mu * eig_l[None, :]
-
-    def precondition(r: NDArray) -> NDArray:
-        z = (Q.T @ (s[:, None] * r) @ P) / denom
-        return s[:, None] * (Q @ z @ P.T)
-
-    b = R.T @ (w * residual_targets).T  # (n, T)
-    a = precondition(b)
-    r = b - apply(a)
-    z = precondition(r)
-    p, rz = z.copy(), float((r * z).sum())
-    norm_b, it = float(np.linalg.norm(b)), 0
-    while np.linalg.norm(r) > rtol * norm_b and it < max_iter:
-        q = apply(p)
-        alpha = rz / float((p * q).sum())
-        a += alpha * p
-        r -= alpha * q
-        z = precondition(r)
-        rz, rz_old = float((r * z).sum()), rz
-        p = z + (rz / rz_old) * p
-        it += 1
-    return a.T, it
+    """:class:`LeastSquares`' minimiser a (T, n) and iterations for ``weights`` (T, S),
+    preconditioned with their mean over frames (exact when they do not change)."""
+    ls = LeastSquares(R, volume_share, stress_cost, rate_cost, weights.mean(axis=0), len(weights))
+    return ls.solve(residual_targets, weights)
 
 
 def fit_actuation(
@@ -171,11 +204,17 @@ def fit_actuation(
     stress_cost: float,
     rate_cost: float,
     solver: str = "auto",
+    robust: float = 0.0,
 ) -> ActuationFit:
     """The actuation with which ``model`` (the basis material, static) under ``conditions``
     (driven and fixed nodes; no springs) moves the ``observed`` (S,) free nodes to
     ``targets`` (T, S, 3) m displacements, weighted by ``weights`` (T, S) >= 0; penalties
-    ``stress_cost`` and ``rate_cost`` in m/Pa (module docstring)."""
+    ``stress_cost`` and ``rate_cost`` in m/Pa (module docstring).
+
+    ``robust`` > 0 (m): Huber's loss instead of the square for each node's misfit e beyond
+    it, by ``ROBUST_ROUNDS`` reweightings w -> w min(1, robust / e), each warm-started from
+    the last: motion the conditions contradict (a node the prescribed bone drags where the
+    capture holds it) no longer calls for stresses far beyond the rest of the face's."""
     n_frames, n_obs = np.shape(weights)
     if conditions.springs is not None:
         raise ValueError("the inverse step takes Dirichlet conditions only, not springs")
@@ -193,10 +232,15 @@ def fit_actuation(
     y = np.asarray(targets, dtype=np.float64).reshape(n_frames, -1)
     # dense products of a few hundred columns: one BLAS thread (two, on cores other
     # processes use, took 10 times as long on the demo)
+    weights = np.asarray(weights, dtype=np.float64)
     with threadpool_limits(limits=1, user_api="blas"):
-        a, iterations = solve_coefficients(
-            R, y - passive, np.asarray(weights, float), share, stress_cost, rate_cost
-        )
+        ls = LeastSquares(R, share, stress_cost, rate_cost, weights.mean(axis=0), n_frames)
+        a, iterations = ls.solve(y - passive, weights)
+        for _ in range(ROBUST_ROUNDS if robust > 0 else 0):
+            misfit = np.linalg.norm((passive + a @ R.T - y).reshape(n_frames, n_obs, 3), axis=2)
+            huber = weights * np.minimum(1.0, robust / np.maximum(misfit, 1e-300))
+            a, more = ls.solve(y - passive, huber, start=a)
+            iterations += more
     seconds["least_squares"] = time.perf_counter() - t0
     return ActuationFit(
         coefficients=a.reshape(n_frames, basis.n_patches, len(DEVIATORIC)),
