@@ -49,7 +49,7 @@ from physanim.fem.statics import free_dofs
 #: right-hand sides per multi-RHS solve (bounds the memory of the solves, n_u x this)
 SOLVE_BLOCK = 128
 #: reweightings of the robust (Huber) fit
-ROBUST_ROUNDS = 3
+ROBUST_ROUNDS = 2
 
 
 @dataclass(frozen=True)
@@ -104,9 +104,10 @@ def response(
     return out[:, : basis.size], out[:, basis.size :].T, seconds
 
 
-def _difference_laplacian(n: int) -> NDArray:
-    """L (n, n) with a^T L a = sum_t |a_t - a_(t-1)|^2 (first differences of n frames)."""
-    D = np.diff(np.eye(n), axis=0)
+def _difference_laplacian(n: int, anchored: bool = False) -> NDArray:
+    """L (n, n) with a^T L a = sum_t |a_t - a_(t-1)|^2, the first differences of n frames,
+    or with ``anchored`` of n frames after one held at zero (whose step counts too)."""
+    D = np.diff(np.eye(n + anchored), axis=0)[:, anchored:]
     return D.T @ D
 
 
@@ -120,7 +121,8 @@ def _normalised(weights: NDArray) -> NDArray:
 class LeastSquares:
     """The normal equations of the module docstring's objective for responses R (3S, n) m/Pa
     over T frames, ``volume_share`` (n,) v of each coefficient's patch, ``stress_cost`` and
-    ``rate_cost`` m/Pa; preconditioned by their exact solution for the per-frame weights
+    ``rate_cost`` m/Pa (``anchored``: the T frames follow one whose coefficients are held
+    at zero); preconditioned by their exact solution for the per-frame weights
     ``mean_weights`` (S,) used in every frame (diagonal in the eigenvectors Q of
     v^-1/2 H v^-1/2 and P of the first-difference Laplacian)."""
 
@@ -132,10 +134,11 @@ class LeastSquares:
         rate_cost: float,
         mean_weights: NDArray,
         n_frames: int,
+        anchored: bool = False,
     ) -> None:
         self.R, self.v = R, np.asarray(volume_share, dtype=np.float64)
         self.lam, self.mu = stress_cost**2, rate_cost**2
-        self.lap = _difference_laplacian(n_frames)
+        self.lap = _difference_laplacian(n_frames, anchored)
         self.s = 1.0 / np.sqrt(self.v)
         hbar = (R * _normalised(mean_weights[None])[0][:, None]).T @ R
         eig_h, self.Q = np.linalg.eigh(self.s[:, None] * hbar * self.s[None, :])
@@ -180,20 +183,6 @@ class LeastSquares:
         return a.T, it
 
 
-def solve_coefficients(
-    R: NDArray,
-    residual_targets: NDArray,
-    weights: NDArray,
-    volume_share: NDArray,
-    stress_cost: float,
-    rate_cost: float,
-) -> tuple[NDArray, int]:
-    """:class:`LeastSquares`' minimiser a (T, n) and iterations for ``weights`` (T, S),
-    preconditioned with their mean over frames (exact when they do not change)."""
-    ls = LeastSquares(R, volume_share, stress_cost, rate_cost, weights.mean(axis=0), len(weights))
-    return ls.solve(residual_targets, weights)
-
-
 def fit_actuation(
     model: FemModel,
     basis: StressBasis,
@@ -208,8 +197,9 @@ def fit_actuation(
 ) -> ActuationFit:
     """The actuation with which ``model`` (the basis material, static) under ``conditions``
     (driven and fixed nodes; no springs) moves the ``observed`` (S,) free nodes to
-    ``targets`` (T, S, 3) m displacements, weighted by ``weights`` (T, S) >= 0; penalties
-    ``stress_cost`` and ``rate_cost`` in m/Pa (module docstring).
+    ``targets`` (T, S, 3) m displacements from frame 0, weighted by ``weights`` (T, S) >= 0;
+    penalties ``stress_cost`` and ``rate_cost`` in m/Pa (module docstring). Frame 0 is the
+    rest: its actuation is zero (so a run starts from rest, with no static solve).
 
     ``robust`` > 0 (m): Huber's loss instead of the square for each node's misfit e beyond
     it, by ``ROBUST_ROUNDS`` reweightings w -> w min(1, robust / e), each warm-started from
@@ -229,18 +219,24 @@ def fit_actuation(
     t0 = time.perf_counter()
     vol = basis.patch_volumes(model.volumes)
     share = np.repeat(vol / vol.sum(), len(DEVIATORIC))
-    y = np.asarray(targets, dtype=np.float64).reshape(n_frames, -1)
+    # frame 0 is the rest the motion is measured from: no actuation there (a = 0), the other
+    # frames' coefficients are the unknowns, anchored to it by the difference penalty
+    rest = np.zeros((1, R.shape[1]))
+    y = np.asarray(targets, dtype=np.float64).reshape(n_frames, -1)[1:] - passive[1:]
+    weights = np.asarray(weights, dtype=np.float64)[1:]
     # dense products of a few hundred columns: one BLAS thread (two, on cores other
     # processes use, took 10 times as long on the demo)
-    weights = np.asarray(weights, dtype=np.float64)
     with threadpool_limits(limits=1, user_api="blas"):
-        ls = LeastSquares(R, share, stress_cost, rate_cost, weights.mean(axis=0), n_frames)
-        a, iterations = ls.solve(y - passive, weights)
+        ls = LeastSquares(
+            R, share, stress_cost, rate_cost, weights.mean(axis=0), n_frames - 1, True
+        )
+        a, iterations = ls.solve(y, weights)
         for _ in range(ROBUST_ROUNDS if robust > 0 else 0):
-            misfit = np.linalg.norm((passive + a @ R.T - y).reshape(n_frames, n_obs, 3), axis=2)
+            misfit = np.linalg.norm((a @ R.T - y).reshape(n_frames - 1, n_obs, 3), axis=2)
             huber = weights * np.minimum(1.0, robust / np.maximum(misfit, 1e-300))
-            a, more = ls.solve(y - passive, huber, start=a)
+            a, more = ls.solve(y, huber, start=a)
             iterations += more
+    a = np.vstack([rest, a])
     seconds["least_squares"] = time.perf_counter() - t0
     return ActuationFit(
         coefficients=a.reshape(n_frames, basis.n_patches, len(DEVIATORIC)),

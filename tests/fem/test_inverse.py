@@ -7,7 +7,7 @@ from fem_meshes import box_mesh
 
 from physanim.fem.actuation import StressBasis, model_force_operator
 from physanim.fem.boundary import BoundaryConditions
-from physanim.fem.inverse import fit_actuation, solve_coefficients
+from physanim.fem.inverse import LeastSquares, fit_actuation
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.statics import solve_static
@@ -91,9 +91,11 @@ def test_the_regularisation_leaves_no_actuation_far_from_any_motion():
 
 
 @pytest.mark.parametrize("vary", [False, True])
-def test_the_least_squares_over_frames_solve_the_normal_equations(vary):
+@pytest.mark.parametrize("anchored", [False, True])
+def test_the_least_squares_over_frames_solve_the_normal_equations(vary, anchored):
     """Against the stacked normal equations solved directly: frame-mean weights make the
-    preconditioner exact (no iteration), weights that vary over frames take a few."""
+    preconditioner exact (no iteration), weights that vary over frames take a few; with
+    ``anchored`` the frames follow one held at zero (its step to the first one counts)."""
     rng = np.random.default_rng(3)
     n_obs, n, n_frames = 12, 7, 6
     R = rng.normal(size=(3 * n_obs, n)) * 1e-6
@@ -102,12 +104,14 @@ def test_the_least_squares_over_frames_solve_the_normal_equations(vary):
     v = rng.uniform(0.5, 2.0, n)
     v /= v.sum()
     lam, mu = (3e-5) ** 2, (1e-4) ** 2
-    a, iterations = solve_coefficients(R, y, w, v, 3e-5, 1e-4)
+    ls = LeastSquares(R, v, 3e-5, 1e-4, w.mean(axis=0), n_frames, anchored)
+    a, iterations = ls.solve(y, w)
     assert (iterations > 0) == vary
     A = np.zeros((n_frames * n, n_frames * n))
     b = np.zeros(n_frames * n)
-    diff = np.diff(np.eye(n_frames), axis=0)
+    diff = np.diff(np.eye(n_frames + anchored), axis=0)[:, int(anchored) :]
     lap = diff.T @ diff
+    assert lap[0, 0] == 1 + anchored and lap[-1, -1] == 1
     for t in range(n_frames):
         wt = np.repeat(w[t] / w[t].sum(), 3)
         block = slice(t * n, (t + 1) * n)
