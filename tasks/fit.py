@@ -38,7 +38,9 @@ def compute(params: FitParams, track: TrackOutput, ctx: StageContext[FitParams])
     names, points, conf = track.landmark_names, track.points, track.confidence
     _check_tracked(points, conf, params)
     model = load_face_model()
-    embedding = embed_landmarks(model, names, points, conf, params)
+    # markerless landmarks are not exactly the points they are named after: placed by position
+    markers = track.backend != "markerless"
+    embedding = embed_landmarks(model, names, points, conf, params, on_vertices=markers)
     result = fit_sequence(model, embedding, points, conf, params, progress=ctx.progress("fit"))
     summary = dict(
         rms_mm=round(float(result.rms.mean()) * 1e3, 3),
@@ -76,6 +78,6 @@ def _check_tracked(points: np.ndarray, confidence: np.ndarray, params: FitParams
 SPEC = StageSpec.typed(
     "fit",
     compute,
-    version="1",
+    version="2",
     doc="rigid pose + shape units once, action units per frame -> motion mesh",
 )

@@ -102,7 +102,7 @@ def compute(
 SPEC = StageSpec.typed(
     "track",
     compute,
-    version="2",
+    version="3",
     doc="markers (or markerless face mesh) tracked in 2D, lifted to 3D (depth/stereo), smoothed",
     fingerprint=fingerprint,
 )

@@ -230,29 +230,35 @@ def embed_landmarks(
     landmarks: np.ndarray,
     confidence: np.ndarray,
     params: FitParams,
+    *,
+    on_vertices: bool = True,
 ) -> Embedding:
     """Embed named landmarks on the model: feature points on their vertices, others closest.
 
     Landmarks named in ``FEATURE_POINTS`` sit on the model vertex of that name; the others
     (extra markers, whatever their names) are placed where their neutral position (mean of the first
     ``params.neutral_frames`` frames of ``landmarks`` (T, K, 3) m, weighted by ``confidence``
-    (T, K)) meets the model after a neutral fit to the named ones.
+    (T, K)) meets the model after a neutral fit to the named ones. Without ``on_vertices``
+    every landmark is placed so: for landmarks that are not exactly the anatomical points
+    they are named after (markerless: the face mesh puts the demo actor's mouth 5-8 mm high),
+    pinning them on their vertices would bend the model towards the bias.
     """
     named = np.array([n in FEATURE_POINTS for n in names])
     if named.sum() < 3:
         raise ValueError(f"names: need at least 3 of FEATURE_POINTS {FEATURE_POINTS}, got {names}")
     emb = embed_vertices(model, [n for n, ok in zip(names, named, strict=True) if ok])
-    if named.all():
+    if named.all() and on_vertices:
         return emb
     neutral = fit_neutral(model, emb, landmarks[:, named], confidence[:, named], params)
+    placed = ~named if on_vertices else np.ones(len(names), dtype=bool)
     n = min(params.neutral_frames, len(landmarks))
-    w = _weights(landmarks[:n], confidence[:n], params)[:, ~named]
-    mean = np.einsum("tk,tkc->kc", w, np.nan_to_num(landmarks[:n, ~named]))
+    w = _weights(landmarks[:n], confidence[:n], params)[:, placed]
+    mean = np.einsum("tk,tkc->kc", w, np.nan_to_num(landmarks[:n, placed]))
     mean /= np.maximum(w.sum(axis=0), 1e-12)[:, None]
     rot, t = pose_matrix(neutral.pose)
     extra = embed_points(model, (mean - t) @ rot, neutral.su)
     vertices = np.zeros((len(names), 3), dtype=np.int64)
     weights = np.zeros((len(names), 3))
     vertices[named], weights[named] = emb.vertices, emb.weights
-    vertices[~named], weights[~named] = extra.vertices, extra.weights
+    vertices[placed], weights[placed] = extra.vertices, extra.weights
     return Embedding(vertices=vertices, weights=weights)

@@ -70,7 +70,7 @@ def _faces(cap: Capture, track: TrackParams, report: CheckReport) -> None:
     from physanim.tracking.checks import SCALE_FIX, SCALE_RANGE, face_scale
     from physanim.tracking.markerless import (
         MarkerlessUnavailableError,
-        feature_template,
+        landmark_template,
         track_markerless_2d,
     )
 
@@ -83,7 +83,7 @@ def _faces(cap: Capture, track: TrackParams, report: CheckReport) -> None:
             report.problems.append(Problem("error", f"track.backend=markerless: {exc}"))
         return
     n = int((conf > 0).any(axis=1).sum())
-    template = feature_template()
+    template = landmark_template()
     tracks = tracks_from_depth(uv, conf, cap.depth, cap.K, template, cap.fps, track)
     scale = face_scale(tracks, template)
     text = f"found in {n} of {cap.n_frames} frames (MediaPipe face mesh)"

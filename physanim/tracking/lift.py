@@ -5,6 +5,8 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import map_coordinates
 
 
 def backproject(uv: np.ndarray, z: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -12,6 +14,15 @@ def backproject(uv: np.ndarray, z: np.ndarray, K: np.ndarray) -> np.ndarray:
     x = (uv[..., 0] - K[0, 2] - K[0, 1] * (uv[..., 1] - K[1, 2]) / K[1, 1]) / K[0, 0]
     y = (uv[..., 1] - K[1, 2]) / K[1, 1]
     return np.stack([x * z, y * z, z], axis=-1)
+
+
+def sample(image: NDArray, uv: NDArray) -> NDArray:
+    """Bilinear samples (P,) or (P, C) of ``image`` (H, W) or (H, W, C) at pixels ``uv``
+    (P, 2) (x, y); NaN outside the image or where a neighbouring pixel is NaN."""
+    coords = [uv[:, 1], uv[:, 0]]
+    if image.ndim == 2:
+        return map_coordinates(image, coords, order=1, mode="constant", cval=np.nan)
+    return np.stack([sample(image[..., c], uv) for c in range(image.shape[2])], axis=1)
 
 
 def sample_depth(depth: np.ndarray, uv: np.ndarray, window: int) -> np.ndarray:

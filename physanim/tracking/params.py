@@ -57,6 +57,16 @@ class TrackParams(BaseModel):
     markerless_min_presence: float = Field(
         0.5, gt=0.0, lt=1.0, description="markerless: min face-mesh presence score (probability)"
     )
+    markerless_flow: bool = Field(
+        True,
+        description="markerless: landmarks follow the first frame with a face by dense optical "
+        "flow (DIS), the face mesh's own estimate only where the flow fails its check; false: "
+        "the face mesh's estimate in every frame",
+    )
+    markerless_flow_check_px: float = Field(
+        2.0, gt=0.0,
+        description="markerless: max forward-backward disagreement of a landmark's flow (px)",
+    )  # fmt: skip
     stereo_row_band_px: float = Field(
         2.0, gt=0.0, description="stereo: max row difference of a left/right match (px)"
     )

@@ -1,6 +1,6 @@
 """Track a recording with the configured backend: painted markers lifted to 3D by the depth or
-by triangulating the stereo pair, or the markerless face mesh (the face model's feature
-points); then the checks of ``physanim.tracking.checks``."""
+by triangulating the stereo pair, or the markerless face mesh's landmarks followed by optical
+flow; then the checks of ``physanim.tracking.checks``."""
 
 from __future__ import annotations
 
@@ -42,18 +42,22 @@ def track_recording(
     """Track ``colour`` (T, H, W, 3) uint8 with ``depth`` (T, H, W) m (numpy or Zarr, read
     only by the backends that use them) and intrinsics ``K`` (3, 3) px at ``fps`` frames/s.
 
-    ``params.backend`` "markerless": the face model's feature points; else the markers of the
-    ``template`` file (JSON or Zarr), lifted by ``lift`` "depth" or "stereo" (the pair in
-    ``stereo_dir``). Raises ``TrackingError`` for tracks with nothing lifted to 3D or a face
-    of the wrong size (``check_tracks``)."""
+    ``params.backend`` "markerless": the face mesh's landmarks (``MARKERLESS_POINTS``, their
+    neutral positions from the face model); else the markers of the ``template`` file (JSON or
+    Zarr), lifted by ``lift`` "depth" or "stereo" (the pair in ``stereo_dir``). Raises
+    ``TrackingError`` for tracks with nothing lifted to 3D or a face of the wrong size
+    (``check_tracks``)."""
     from physanim.tracking.checks import check_tracks
     from physanim.tracking.template import load_marker_template
 
     if params.backend == "markerless":
-        from physanim.face.landmarks import FEATURE_POINTS
-        from physanim.tracking.markerless import feature_template, track_markerless_rgbd
+        from physanim.tracking.markerless import (
+            MARKERLESS_POINTS,
+            landmark_template,
+            track_markerless_rgbd,
+        )
 
-        names, neutral = list(FEATURE_POINTS), feature_template()
+        names, neutral = list(MARKERLESS_POINTS), landmark_template()
         tracks = track_markerless_rgbd(colour[...], depth[...], K, fps, params, progress)
         what = "the face model"
     else:

@@ -10,8 +10,9 @@ import pytest
 pytest.importorskip("ai_edge_litert", reason="markerless extra not installed")
 skdata = pytest.importorskip("skimage.data", reason="scikit-image (real test photo) missing")
 
-from physanim.face.landmarks import FEATURE_POINTS, mirror_name  # noqa: E402
+from physanim.face.landmarks import mirror_name  # noqa: E402
 from physanim.tracking.markerless import (  # noqa: E402
+    MARKERLESS_POINTS,
     MarkerlessUnavailableError,
     detect_face,
     model_dir,
@@ -20,7 +21,7 @@ from physanim.tracking.markerless import (  # noqa: E402
 )
 from physanim.tracking.params import TrackParams  # noqa: E402
 
-IDX = {n: i for i, n in enumerate(FEATURE_POINTS)}
+IDX = {n: i for i, n in enumerate(MARKERLESS_POINTS)}
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +47,7 @@ def test_detector_finds_the_face(photo: np.ndarray) -> None:
 
 def test_feature_points_geometry(points: np.ndarray) -> None:
     v = points[:, 1]
-    p = {n: points[IDX[n]] for n in FEATURE_POINTS}
+    p = {n: points[IDX[n]] for n in MARKERLESS_POINTS}
     eyes = max(v[IDX[n]] for n in ("ex_L", "ex_R", "pi_L", "pi_R"))
     mouth = min(v[IDX[n]] for n in ("ch_L", "ch_R", "cphi_L", "cphi_R"))
     assert v[IDX["glabella"]] < eyes < v[IDX["pronasale"]] < mouth
@@ -54,7 +55,10 @@ def test_feature_points_geometry(points: np.ndarray) -> None:
     eye_span = p["ex_L"][0] - p["ex_R"][0]
     assert 45.0 < eye_span < 80.0  # face about 100 px wide
     mid = (p["ex_L"][0] + p["ex_R"][0]) / 2
-    for name in FEATURE_POINTS:
+    chin = max(v[IDX[n]] for n in ("ch_L", "ch_R", "labrale_inferius"))
+    assert chin < min(v[IDX[n]] for n in ("labiomental", "pogonion", "chin_3_L", "chin_3_R"))
+    assert v[IDX["nasion"]] < eyes and p["labrale_inferius"][1] > p["cphi_L"][1]
+    for name in MARKERLESS_POINTS:
         twin = mirror_name(name)
         if name.endswith("_L"):
             assert p[name][0] > p[twin][0] + 5.0, name  # actor's left is image right
@@ -74,7 +78,7 @@ def test_mirrored_photo_swaps_sides(photo: np.ndarray, points: np.ndarray) -> No
     flipped = np.ascontiguousarray(photo[:, ::-1])
     uv, _ = track_markerless_2d([flipped], TrackParams())
     w = photo.shape[1]
-    swapped = np.array([points[IDX[mirror_name(n)]] for n in FEATURE_POINTS])
+    swapped = np.array([points[IDX[mirror_name(n)]] for n in MARKERLESS_POINTS])
     swapped[:, 0] = w - 1 - swapped[:, 0]
     assert np.abs(uv[0] - swapped).max() < 4.0
 
@@ -98,7 +102,7 @@ def test_rgbd_output_matches_the_markers_backend(photo: np.ndarray) -> None:
     depth = np.full((h, w), 0.6, np.float32)
     params = TrackParams(smoothing="none")
     tracks = track_markerless_rgbd([photo] * 3, [depth] * 3, K, 30.0, params)
-    k = len(FEATURE_POINTS)
+    k = len(MARKERLESS_POINTS)
     assert tracks.uv.shape == (3, k, 2) and tracks.points.shape == (3, k, 3)
     assert tracks.confidence.shape == (3, k) and tracks.head_pose.shape == (3, 4, 4)
     assert np.allclose(tracks.points[..., 2], 0.6)

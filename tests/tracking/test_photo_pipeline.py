@@ -16,6 +16,7 @@ from physanim.face.params import FitParams
 from physanim.pipeline import StageFailed, execute_plan_locally, make_plan
 from physanim.store import StageStore
 from physanim.tracking.dataset_check import check_dataset
+from physanim.tracking.markerless import MARKERLESS_POINTS
 from tasks.fit import _check_tracked
 from tests.capture.photo_dataset import FX, photo_depth, write_photo_dataset
 
@@ -45,7 +46,7 @@ def test_real_photo_through_check_ingest_track_fit(tmp_path: Path) -> None:
     assert track.attrs["summary"]["tracked_fraction"] == 1.0
     assert track.attrs["summary"]["warnings"] == []
     uv, points = track["uv"][...], track["points"][...]
-    assert uv.shape == (4, len(FEATURE_POINTS), 2)
+    assert uv.shape == (4, len(MARKERLESS_POINTS), 2)
     # The photo moves 4 px right and 2 px down per frame: so do the landmarks.
     motion = uv - uv[0]
     expected = np.array([[4 * t, 2 * t] for t in range(4)], float)[:, None, :]
