@@ -10,6 +10,7 @@ calls the captured scan. Version history: CHANGELOG.md.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +19,9 @@ from physanim.tracking.dense_params import DenseParams
 from tasks.align import AlignOutput
 from tasks.ingest import IngestOutput
 from tasks.track import TrackOutput
+
+if TYPE_CHECKING:
+    from physanim.tracking.register import Registration
 
 
 @dataclass(frozen=True)
@@ -70,15 +74,38 @@ def compute(
         flow_error_px_median=round(float(np.nanmedian(dense.flow_error_px)), 3),
         seconds_per_frame=round(dense.seconds_per_frame, 3),
     )
+    if dense.registration is not None:
+        summary.update(_registration_summary(dense.registration, track.head_pose[0]))
     motion = (vertices[None] + dense.displacement).astype(np.float32)
     return DenseOutput(
         motion, dense.confidence, dense.head_pose, dense.flow_error_px, "dense", summary=summary
     )
 
 
+def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[str, object]:
+    """How far registering the scan to the neutral depth moved the tracker's neutral head pose
+    ``tracker_pose`` (4, 4) (mm, degrees), the registration's RMS residual (mm) and, when it
+    was not applied, a warning."""
+    change = np.linalg.inv(tracker_pose) @ reg.pose
+    turn = np.degrees(np.arccos(np.clip((np.trace(change[:3, :3]) - 1) / 2, -1.0, 1.0)))
+    out: dict[str, object] = dict(
+        registration_shift_mm=round(float(np.linalg.norm(change[:3, 3])) * 1e3, 3),
+        registration_turn_deg=round(float(turn), 3),
+        registration_rms_mm=round(reg.rms_m * 1e3, 3),
+    )
+    if not reg.converged:
+        out["warnings"] = [
+            f"the scan did not register to the neutral frame's depth ({reg.inliers} of "
+            f"{reg.candidates} facing scan points within reach): dense capture kept the "
+            "tracker's head pose, which biased landmarks (markerless) put off the face; check "
+            "that the scan is the actor's and that frame 0 shows the neutral face"
+        ]
+    return out
+
+
 SPEC = StageSpec.typed(
     "dense",
     compute,
-    version="1",
+    version="2",
     doc="captured motion of every scan vertex: dense capture (flow + depth) or the kinematic scan",
 )

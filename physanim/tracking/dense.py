@@ -4,7 +4,10 @@ Scene flow from optical flow plus depth, registered to the neutral frame so erro
 accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
 
 1. **Neutral view.** The scan (actor frame, N vertices) is posed by the landmark tracker's head
-   pose at frame 0 and projected; a vertex is *seen* where the measured depth agrees with its
+   pose at frame 0, registered to the neutral depth (``physanim.tracking.register``: the
+   pose then comes from the surface, so biased markerless landmarks do not misplace the scan;
+   the tracker's poses of the other frames get the same correction) and projected; a vertex
+   is *seen* where the measured depth agrees with its
    own (``visible_tolerance_m``) and the surface faces the camera (``min_cos_view``). Its
    neutral position is lifted from the measured depth, so a constant offset between the scan
    and the measured surface cancels from the motion.
@@ -41,11 +44,12 @@ import cv2
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.ndimage import gaussian_filter1d, map_coordinates
+from scipy.ndimage import gaussian_filter1d
 
 from physanim.mesh.topology import uniform_laplacian, vertex_normals
 from physanim.tracking.dense_params import DenseParams
-from physanim.tracking.lift import backproject
+from physanim.tracking.lift import backproject, sample
+from physanim.tracking.register import Registration, register_to_depth
 from physanim.tracking.tracks import head_poses
 
 
@@ -57,7 +61,8 @@ class DenseMotion:
     ``confidence`` (T, N) float32 in [0, 1], 0 where the vertex was filled from neighbours;
     ``head_pose`` (T, 4, 4) camera <- actor, m; ``seen`` (N,) bool, seen in the neutral
     frame; ``flow_error_px`` (T,) median forward-backward flow disagreement of the seen
-    vertices; ``seconds_per_frame`` wall time of the flow, lifting and filling per frame.
+    vertices; ``seconds_per_frame`` wall time of the flow, lifting and filling per frame;
+    ``registration`` of the scan to the neutral depth (None when not asked for).
     """
 
     displacement: NDArray
@@ -66,29 +71,26 @@ class DenseMotion:
     seen: NDArray
     flow_error_px: NDArray
     seconds_per_frame: float
+    registration: Registration | None = None
 
 
 def smooth_depth(depth: NDArray, sigma_px: float) -> NDArray:
     """Gaussian-smoothed depth (H, W) float32 m, invalid (NaN or <= 0) pixels left out
     (normalised convolution); NaN where less than half the kernel's weight is valid."""
-    valid = np.isfinite(depth) & (depth > 0)
+    return blur_valid(depth, np.isfinite(depth) & (depth > 0), sigma_px)
+
+
+def blur_valid(values: NDArray, valid: NDArray, sigma_px: float) -> NDArray:
+    """Gaussian blur (H, W) float32 of ``values`` over the ``valid`` (H, W) pixels only
+    (normalised convolution); NaN where less than half the kernel's weight is valid."""
     if sigma_px <= 0:
-        return np.where(valid, depth, np.nan).astype(np.float32)
-    num = cv2.GaussianBlur(np.where(valid, depth, 0.0).astype(np.float32), (0, 0), sigma_px)
+        return np.where(valid, values, np.nan).astype(np.float32)
+    num = cv2.GaussianBlur(np.where(valid, values, 0.0).astype(np.float32), (0, 0), sigma_px)
     den = cv2.GaussianBlur(valid.astype(np.float32), (0, 0), sigma_px)
     with np.errstate(invalid="ignore", divide="ignore"):
         out = num / den
     out[den < 0.5] = np.nan
     return out
-
-
-def sample(image: NDArray, uv: NDArray) -> NDArray:
-    """Bilinear samples (P,) or (P, C) of ``image`` (H, W) or (H, W, C) at pixels ``uv``
-    (P, 2) (x, y); NaN outside the image or where a neighbouring pixel is NaN."""
-    coords = [uv[:, 1], uv[:, 0]]
-    if image.ndim == 2:
-        return map_coordinates(image, coords, order=1, mode="constant", cval=np.nan)
-    return np.stack([sample(image[..., c], uv) for c in range(image.shape[2])], axis=1)
 
 
 def _project(points: NDArray, K: NDArray) -> NDArray:
@@ -113,19 +115,23 @@ def _flow_engine(params: DenseParams) -> cv2.DISOpticalFlow:
 
 @dataclass(frozen=True)
 class _NeutralView:
-    """Seen vertices' neutral pixels ``uv`` (S, 2), ``points`` (S, 3) m actor frame."""
+    """Seen vertices' neutral pixels ``uv`` (S, 2), smoothed depth ``z`` (S,) m, ``points``
+    (S, 3) m actor frame, and the neutral frame's ``raw_depth`` (H, W) m (NaN invalid)."""
 
     seen: NDArray
     uv: NDArray
+    z: NDArray
     points: NDArray
+    raw_depth: NDArray
 
 
 def neutral_view(
     vertices: NDArray, faces: NDArray, K: NDArray, pose: NDArray, depth: NDArray,
-    params: DenseParams,
+    raw_depth: NDArray, params: DenseParams,
 ) -> _NeutralView:  # fmt: skip
     """Which scan vertices (N, 3) m actor frame the neutral frame sees (camera <- actor
-    ``pose`` (4, 4), smoothed ``depth`` (H, W) m), their pixels and measured positions."""
+    ``pose`` (4, 4), smoothed ``depth`` and ``raw_depth`` (H, W) m), their pixels and measured
+    positions."""
     cam = _transform(pose, vertices)
     normals = vertex_normals(vertices, faces) @ pose[:3, :3].T
     view = cam / np.linalg.norm(cam, axis=1, keepdims=True)
@@ -136,7 +142,8 @@ def neutral_view(
         seen = facing & (np.abs(z - cam[:, 2]) < params.visible_tolerance_m)
     measured = backproject(uv[seen], z[seen], K)
     inv = np.linalg.inv(pose)
-    return _NeutralView(seen, uv[seen], _transform(inv, measured))
+    raw = np.where(raw_depth > 0, raw_depth, np.nan).astype(np.float32)
+    return _NeutralView(seen, uv[seen], z[seen], _transform(inv, measured), raw)
 
 
 def _frame_points(
@@ -150,7 +157,18 @@ def _frame_points(
     uv = view.uv + sample(forward, view.uv)
     back = uv + sample(backward, uv)
     fb = np.linalg.norm(back - view.uv, axis=1)
-    z = sample(smooth_depth(depth, params.depth_sigma_px), uv)
+    # the change of depth, pulled back to the neutral frame's pixels by the flow, is smooth
+    # where the depth itself is not (lip edges, the nose tip): smoothed, it is not biased there
+    h, w = depth.shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    pulled = cv2.remap(
+        np.where(depth > 0, depth, np.nan).astype(np.float32), xs + forward[..., 0],
+        ys + forward[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+        borderValue=np.nan,
+    )  # fmt: skip
+    change = pulled - view.raw_depth
+    change = blur_valid(change, np.isfinite(change), params.depth_sigma_px)
+    z = view.z + sample(change, view.uv)
     points = backproject(uv, z, K)
     with np.errstate(invalid="ignore"):
         points[~(fb < params.max_flow_error_px)] = np.nan
@@ -201,13 +219,15 @@ class DenseObservations:
     """What the frames show of the seen vertices (S of the scan's N): ``seen`` (N,) bool;
     ``displacement`` (T, S, 3) m actor frame relative to frame 0, NaN where not observed;
     ``flow_error_px`` (T, S) forward-backward flow disagreement; ``head_pose`` (T, 4, 4)
-    camera <- actor; ``seconds`` wall time."""
+    camera <- actor; ``seconds`` wall time; ``registration`` of the scan to the neutral
+    depth (None when not asked for)."""
 
     seen: NDArray
     displacement: NDArray
     flow_error_px: NDArray
     head_pose: NDArray
     seconds: float
+    registration: Registration | None = None
 
 
 def observe(
@@ -224,12 +244,25 @@ def observe(
     ``vertices`` (N, 3) m actor frame, ``faces`` (F, 3), from ``color`` (T, H, W, 3) uint8
     RGB and ``depth`` (T, H, W) m (NaN or 0 invalid; Zarr arrays are read a frame at a
     time), intrinsics ``K`` (3, 3) px and the landmark tracker's ``head_pose`` (T, 4, 4)
-    camera <- actor. Frame 0 is the neutral."""
+    camera <- actor. Frame 0 is the neutral. With ``params.register_scan`` the scan is
+    registered to the neutral depth and every tracker pose gets the correction of frame 0's;
+    a registration that keeps fewer than half the scan's facing points is not applied."""
     T = color.shape[0]
     start = time.perf_counter()
     gray0 = cv2.cvtColor(np.asarray(color[0]), cv2.COLOR_RGB2GRAY)
     depth0 = smooth_depth(np.asarray(depth[0], dtype=np.float32), params.depth_sigma_px)
-    view = neutral_view(vertices, faces, K, head_pose[0], depth0, params)
+    head_pose = np.asarray(head_pose, dtype=np.float64)
+    registration = None
+    if params.register_scan:
+        registration = register_to_depth(
+            vertices, vertex_normals(vertices, faces), depth0, K, head_pose[0],
+            params.register_max_distance_m, params.visible_tolerance_m,
+        )  # fmt: skip
+        if registration.converged:
+            head_pose = head_pose @ (np.linalg.inv(head_pose[0]) @ registration.pose)
+    view = neutral_view(
+        vertices, faces, K, head_pose[0], depth0, np.asarray(depth[0], np.float32), params
+    )
     if view.seen.sum() < 3:
         raise ValueError(
             "dense capture: the neutral frame sees fewer than 3 scan vertices; check the head "
@@ -262,8 +295,9 @@ def observe(
     inv = np.linalg.inv(poses)
     actor = np.einsum("tij,tkj->tki", inv[:, :3, :3], cam) + inv[:, None, :3, 3]
     return DenseObservations(
-        view.seen, actor - view.points[None], fb, poses, time.perf_counter() - start
-    )
+        view.seen, actor - view.points[None], fb, poses, time.perf_counter() - start,
+        registration,
+    )  # fmt: skip
 
 
 def fill_motion(
@@ -327,5 +361,6 @@ def dense_track(
         flow_error = np.nanmedian(obs.flow_error_px, axis=1)
     seconds = obs.seconds + time.perf_counter() - start
     return DenseMotion(
-        displacement, confidence, obs.head_pose, obs.seen, flow_error, seconds / color.shape[0]
-    )
+        displacement, confidence, obs.head_pose, obs.seen, flow_error, seconds / color.shape[0],
+        obs.registration,
+    )  # fmt: skip

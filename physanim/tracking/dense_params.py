@@ -66,6 +66,16 @@ class DenseParams(BaseModel):
     temporal_sigma_frames: float = Field(
         1.0, ge=0.0, le=10.0, description="Gaussian smoothing of the motion over time; frames"
     )
+    register_scan: bool = Field(
+        True,
+        description="register the scan to the neutral frame's depth (ICP from the landmark "
+        "tracker's head pose), so biased landmarks (markerless) do not misplace it; bool",
+    )
+    register_max_distance_m: float = Field(
+        0.02, gt=0.0, le=0.1,
+        description="scan registration: farthest scan-to-depth pair kept in the first "
+        "iterations (halved down to visible_tolerance_m); m",
+    )  # fmt: skip
     refine_head_pose: bool = Field(
         True,
         description="re-estimate the head pose from the dense points that ride rigidly "

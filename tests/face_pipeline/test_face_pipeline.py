@@ -38,10 +38,13 @@ def configure(data: Path, *files: str | Path, extra: tuple[str, ...] = ()):
 
 @pytest.fixture(scope="module")
 def demo_run(face_demo):
-    """The default (uniform material) run of the session's coarse demo."""
+    """The default (uniform material) run of the session's coarse demo: (data, config, store,
+    stages that ran, the run's output keys). Outputs are opened by key: other test modules run
+    other variants on the same store, which moves its latest run."""
     data, out = face_demo
     cfg, store = configure(data)
-    return data, cfg, store, RAN.findall(out)
+    keys = {e.stage: e.key for e in make_plan(FACE, cfg, store)}
+    return data, cfg, store, RAN.findall(out), keys
 
 
 @pytest.fixture(scope="module")
@@ -70,26 +73,32 @@ def model_sweep(model2_run):
             f"configs: [{COARSE}]\nset: {{simulate.dt: 0.002, render.every_frames: 6}}\nvariants:",
         )
     )
+    # material outputs already in the store (other modules' variants may have made some)
+    before = {}
+    for model in ("model1", "model2", "model3"):
+        cfg, store = configure(data, f"configs/models/{model}.yaml", extra=("simulate.dt=0.002",))
+        key = {e.stage: e.key for e in make_plan(FACE, cfg, store)}["materials"]
+        before[model] = store.has("materials", key)
     out = physanim("sweep", str(sweep), "--serial")
     assert out.returncode == 0, out.stderr[-3000:]
     folder = ROOT / data / "runs" / "sweeps" / "models"
     summary = json.loads((folder / "summary.json").read_text())
     keys = {v["variant"]: v["keys"] for v in summary["variants"]}
-    return data, keys, RAN.findall(out.stderr), folder / "index.html"
+    return data, keys, RAN.findall(out.stderr), folder / "index.html", before
 
 
 def test_every_stage_runs_and_writes_its_outputs(demo_run) -> None:
-    _, cfg, store, ran = demo_run
+    _, cfg, store, ran, keys = demo_run
     assert ran == [s.name for s in FACE.stages]
-    assert all(store.has(s.name, store.latest(s.name)) for s in FACE.stages)
-    sim = store.open("simulate")
+    assert all(store.has(s.name, keys[s.name]) for s in FACE.stages)
+    sim = store.open("simulate", keys["simulate"])
     n_frames = 12
     assert sim["displacements"].shape[0] == n_frames and sim["displacements"].dtype == np.float32
     d = sim["displacements"]
     assert d.chunks[1:] == d.shape[1:]  # chunked along frames only
-    quality = store.provenance("tetra")["quality"]
+    quality = store.provenance("tetra", keys["tetra"])["quality"]
     assert quality["min_dihedral_deg"] > 0 and quality["n_tets"] > 1000
-    files = store.root / "render" / store.latest("render") / "files"
+    files = store.files("render", keys["render"])
     video = cv2.VideoCapture(str(files / "panel.mp4"))
     assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 6  # every 2nd of 12 frames
     ok, frame = video.read()
@@ -100,8 +109,8 @@ def test_skull_holds_the_mandible_turns_and_landmarks_pull_patches(demo_run) -> 
     """Bone-side nodes: fixed (skull) or turned exactly by the estimated jaw rotation
     (mandible); the jaw opens at the jaw-drop; springs hold at most a quarter of the skin and
     the rest of the skin moves by physics."""
-    _, cfg, store, _ = demo_run
-    mesh, sim = store.open("tetra"), store.open("simulate")
+    _, cfg, store, _, keys = demo_run
+    mesh, sim = store.open("tetra", keys["tetra"]), store.open("simulate", keys["simulate"])
     nodes, disp = mesh["nodes"][...], sim["displacements"][...].astype(np.float64)
     bone, weight = sim["bone_nodes"][...], sim["mandible_weight"][...]
     assert np.array_equal(np.sort(bone), np.nonzero(mesh["bone"][...])[0])
@@ -133,26 +142,31 @@ def test_the_simulated_face_performs_the_capture(demo_run) -> None:
     6.68 mm against the actor's 6.23 mm; relative displacement error 0.41 at the jaw drop and
     0.50 at the smile; peak / 99th-percentile stress 2.48): the FEM mouth opens by as much as
     the actor's within 20 %, the errors stay within 0.05 of those figures, no hot spot."""
-    _, _, store, _ = demo_run
-    summary = store.provenance("evaluate")["summary"]
-    evaluated = store.open("evaluate")
+    _, _, store, _, keys = demo_run
+    summary = store.provenance("evaluate", keys["evaluate"])["summary"]
+    evaluated = store.open("evaluate", keys["evaluate"])
     gap, fidelity = summary["lip_gap_mm"], summary["fidelity"]["fem"]
     opened = {m: gap[m]["jaw_open"] - evaluated[f"lip_gap_{m}"][0] * 1e3 for m in ("truth", "fem")}
     message = f"lip gap {gap}, opening {opened}, fidelity {fidelity}"
     assert opened["truth"] > 3.0, message  # the actor's mouth opens by millimetres
     assert opened["truth"] / 1.2 < opened["fem"] < 1.2 * opened["truth"], message
     assert fidelity["jaw_open"]["overall"] < 0.46 and fidelity["smile"]["overall"] < 0.55, message
-    assert store.provenance("simulate")["summary"]["peak_to_p99_von_mises"] <= 3.0
+    assert store.provenance("simulate", keys["simulate"])["summary"]["peak_to_p99_von_mises"] <= 3.0
 
 
 def test_material_edit_reruns_materials_onward_only(model2_run) -> None:
     """The model overlay re-ran materials onward only, and the report (written from relative
     paths) shows both variants side by side with links that resolve."""
     data, out = model2_run
-    assert RAN.findall(out) == ["materials", "simulate", "evaluate", "render"]
+    assert RAN.findall(out) == ["materials", "simulate", "evaluate", "render", "export"]
     report = ROOT / data / "runs" / "report" / "index.html"
     text = report.read_text()
-    assert re.search(r"<th>measure</th><th>uniform \(\w+\)</th><th>model2 \(\w+\)</th>", text)
+    # the uniform run and this one (the newest, last); other modules' variants may sit between
+    header = re.search(r"<tr><th>measure</th>(.*?)</tr>", text)
+    assert header, text[:2000]
+    columns = re.findall(r"<th>([^<]*)</th>", header.group(1))
+    assert re.fullmatch(r"model2 \(\w+\)", columns[-1]), columns
+    assert any(re.fullmatch(r"uniform \(\w+\)", c) for c in columns[:-1]), columns
     assert "variants_symmetry.png" in text
     for link in re.findall(r"(?:src|href)='([^']+)'", text):
         assert (report.parent / link).is_file(), link
@@ -160,7 +174,7 @@ def test_material_edit_reruns_materials_onward_only(model2_run) -> None:
     cfg, store = configure(data, "configs/models/model2.yaml", extra=edit)
     plan = make_plan(FACE, cfg, store)
     assert [e.stage for e in plan if e.action == "run"] == [
-        "materials", "simulate", "evaluate", "render",
+        "materials", "simulate", "evaluate", "render", "export",
     ]  # fmt: skip
 
 
@@ -179,7 +193,7 @@ def test_regional_models_act_where_they_are_edited(model_sweep) -> None:
     away."""
     from physanim.names import name_index
 
-    data, variants, _, _ = model_sweep
+    data, variants = model_sweep[:2]
     store = StageStore(ROOT / data / "runs" / "store.zarr")
     peak = {}
     for model in ("model1", "model2", "model3"):
@@ -215,13 +229,16 @@ def test_model_sweep_computes_shared_stages_once(model_sweep, demo_run) -> None:
     """configs/sweeps/models.yaml: ingest..tetra and model2's materials..evaluate are the
     earlier runs' (cached), the rest runs once per model; the report shows the three models
     side by side, each with its own video."""
-    data, keys, ran, report_path = model_sweep
+    data, keys, ran, report_path, materials_before = model_sweep
     counts = {s.name: ran.count(s.name) for s in FACE.stages}
+    assert materials_before["model2"]  # model2_run made it
     assert counts == {
         "ingest": 0, "track": 0, "fit": 0, "scan": 0, "align": 0, "tetra": 0,
         "tiles": 1,  # once for the three: the sweep renders every 6th frame
         "dense": 0, "actuate": 0,  # the material edits reuse the captured scan and actuation
-        "materials": 2, "simulate": 2, "evaluate": 2, "render": 3,
+        # model1's and model3's materials unless another module's variant made them
+        "materials": sum(not materials_before[m] for m in ("model1", "model3")),
+        "simulate": 2, "evaluate": 2, "render": 3, "export": 2,  # export reads simulate
     }  # fmt: skip
     store = StageStore(ROOT / data / "runs" / "store.zarr")
     assert list(keys) == ["model1", "model2", "model3"]
@@ -279,7 +296,9 @@ def test_reduced_preview_of_a_model_against_its_full_run(model_sweep, demo_run) 
     out = physanim("run", "--dataset", str(data), "-c", COARSE,
                    *(x for e in edit for x in ("--set", e)))  # fmt: skip
     assert out.returncode == 0, out.stderr[-3000:]
-    assert RAN.findall(out.stderr) == ["materials", "simulate", "evaluate", "render"]
+    assert RAN.findall(out.stderr) == [
+        "materials", "simulate", "evaluate", "render", "export",
+    ]  # fmt: skip
     cfg, store = configure(data, extra=edit)
     keys = {e.stage: e.key for e in make_plan(FACE, cfg, store)}
     summary = store.provenance("simulate", keys["simulate"])["summary"]["reduced"]
@@ -298,11 +317,15 @@ def test_dag_upstream_and_downstream_closures() -> None:
     assert "actuate" not in FACE.downstream("materials")
     assert FACE.upstream("tetra") == ["ingest", "track", "fit", "scan", "align", "tetra"]
     assert FACE.upstream("scan") == ["scan"]  # reads no stage: it runs beside ingest
-    # the fit and kinematic tiles render while the tissue is meshed; no material edit
+    # the fit and captured-scan tiles render while the tissue is meshed; no material edit
     # renders them again
-    assert FACE.upstream("tiles") == ["ingest", "track", "fit", "scan", "align", "tiles"]
+    assert FACE.upstream("tiles") == [
+        "ingest", "track", "fit", "scan", "align", "dense", "tiles",
+    ]  # fmt: skip
     assert "tiles" not in FACE.downstream("materials") and "tiles" in FACE.upstream("render")
-    assert FACE.downstream("materials") == ["materials", "simulate", "evaluate", "render"]
+    assert FACE.downstream("materials") == [
+        "materials", "simulate", "evaluate", "render", "export",
+    ]  # fmt: skip
     assert FACE.upstream("ingest") == ["ingest"]
 
 
