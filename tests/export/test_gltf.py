@@ -120,7 +120,9 @@ def test_the_file_decodes_to_the_animation_within_the_tolerance(
     times, positions, doc = decoded_animation(path)
     np.testing.assert_allclose(times, modes.times, rtol=1e-6)
     assert len(morph.targets) == 3  # the animation's rank
-    assert rms_distance(positions, modes.points) <= (1e-7 if quantized else 1e-8)
+    # float32 file: base + weights x targets is exact to a few float32 steps of the coordinates
+    float32_steps = 4 * np.finfo(np.float32).eps * np.abs(modes.points).max()
+    assert rms_distance(positions, modes.points) <= (1e-7 if quantized else float32_steps)
     assert doc["asset"]["version"] == "2.0" and doc["asset"]["extras"] == {"fps": 30.0}
     assert doc["extensionsRequired"] if quantized else "extensionsRequired" not in doc
     types = {doc["accessors"][t["POSITION"]]["componentType"] for t in doc["meshes"][0]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -106,3 +107,18 @@ def test_toy_pipeline_doc_shows_fields_units_defaults_and_outputs(tmp_path: Path
     section = text[text.index("### raw") :]
     assert "**Parameters** (`NoParams`; `--set raw.<name>=<value>`)\n\nNone." in section
     assert "the stage writes its group itself" in section
+
+
+def test_changelog_says_why_every_stage_has_its_version() -> None:
+    """CHANGELOG.md has a section for every stage of every DAG, and its newest line is the
+    stage's current version: a version bump without its reason fails here."""
+    from flows.dags import get_pipeline
+
+    text = (stage_docs.OUT.parent.parent / "CHANGELOG.md").read_text(encoding="utf-8")
+    for dag in ("face", "keyframe", "arm"):
+        for spec in get_pipeline(dag).stages:
+            head = f"\n### {spec.name}\n"
+            assert head in text, f"CHANGELOG.md: no section for stage {spec.name}"
+            section = text[text.index(head) + len(head) :].split("\n### ")[0]
+            newest = re.search(r"^- \*\*(\d+)\*\*", section, re.M)
+            assert newest and newest.group(1) == spec.version, (spec.name, spec.version)
