@@ -20,7 +20,16 @@ class DenseParams(BaseModel):
     flow_finest_scale: int = Field(
         0, ge=0, le=3, description="DIS flow: finest pyramid level (0 = full resolution); count"
     )
-    flow_patch_px: int = Field(6, ge=4, le=32, description="DIS flow: patch side; px")
+    flow_patch_px: int = Field(
+        4, ge=4, le=32,
+        description="DIS flow: patch side (small patches blur less across the lips when the "
+        "mouth opens); px",
+    )  # fmt: skip
+    flow_margin_px: int = Field(
+        32, ge=0, le=1000,
+        description="the flow is computed in the window the scan covers under the tracker's "
+        "head poses, widened by this much on each side; px",
+    )  # fmt: skip
     flow_stride_px: int = Field(2, ge=1, le=16, description="DIS flow: patch stride; px")
     flow_iterations: int = Field(
         16, ge=1, le=200, description="DIS flow: gradient-descent iterations per patch; count"

@@ -6,6 +6,7 @@ are metres in the colour camera frame (OpenCV axes: +x right, +y down, +z forwar
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,7 +73,10 @@ def rigidity_weights(points: np.ndarray, poses: np.ndarray) -> np.ndarray:
     median over the sequence; weight 1 / (1 + (m_k / median(m))^2).
     """
     stab = np.einsum("tji,tkj->tki", poses[:, :3, :3], points - poses[:, None, :3, 3])
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        # a point never observed (dense capture: a seen vertex the flow always loses) has no
+        # median: NaN, left out below
+        warnings.filterwarnings("ignore", "All-NaN slice", RuntimeWarning)
         spread = ((stab - np.nanmedian(stab, axis=0)) ** 2).sum(axis=2)
     ok = np.isfinite(spread)
     m = np.sqrt(np.where(ok, spread, 0.0).sum(axis=0) / np.maximum(ok.sum(axis=0), 1))

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from physanim.tracking.dense import dense_track, smooth_depth
+from physanim.tracking.dense import dense_track, flow_window, smooth_depth
 from physanim.tracking.dense_params import DenseParams
 from physanim.tracking.lift import backproject
 
@@ -129,3 +129,16 @@ def test_smooth_depth_ignores_invalid_pixels():
     out = smooth_depth(depth, 1.5)
     assert np.allclose(out[np.isfinite(out)], 0.5, atol=1e-6)
     assert np.isfinite(out[12, 12]) and np.isfinite(out[6, 6])  # filled from valid neighbours
+
+
+def test_the_flow_window_holds_the_points_under_every_pose_and_stays_in_the_image():
+    """Two points 2 cm apart at 0.5 m, the head shifted 1 cm right in the second frame: the
+    window spans both frames' pixels plus the margin; a margin past the border is clipped."""
+    points = np.array([[-0.01, 0.0, 0.0], [0.01, 0.0, 0.0]])
+    poses = np.tile(np.eye(4), (2, 1, 1))
+    poses[:, 2, 3] = 0.5
+    poses[1, 0, 3] = 0.01
+    x0, y0, x1, y1 = flow_window(points, poses, K, (SIZE, SIZE), 4)
+    # pixels: x = 128 + 500 * x / 0.5 -> 118, 138 (frame 0) and 128, 148 (frame 1)
+    assert (x0, x1) == (118 - 4, 148 + 4 + 1) and (y0, y1) == (128 - 4, 128 + 4 + 1)
+    assert flow_window(points, poses, K, (SIZE, SIZE), 200) == (0, 0, SIZE, SIZE)
