@@ -52,7 +52,6 @@ from physanim.tracking.lift import backproject, sample
 from physanim.tracking.register import Registration, register_to_depth
 from physanim.tracking.tracks import head_poses
 
-
 #: About how many of the seen vertices (every k-th) re-estimate the head pose.
 POSE_POINTS = 3000
 
