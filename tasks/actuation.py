@@ -8,7 +8,8 @@ the mandible turned as the ``simulate`` drive does (``physanim.fem.inverse``), e
 node weighted by its skin area and the capture's confidence there. The stage reads
 the ``simulate`` section (its model, ``jaw`` and ``actuation`` settings), so the inverse step
 and the FEM run share them; ``simulate.drive.mode: actuation`` runs the edited material with
-this actuation held. The captured motion is read in one place, :func:`captured_motion`.
+this actuation held; under any other drive the stage stores an empty actuation at once (the
+drive's mode is in its key). The captured motion is read in one place, :func:`captured_motion`.
 Version history: CHANGELOG.md.
 """
 
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from pydantic import ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from physanim.face.params import ActuationParams, DriveParams, JawParams
 from physanim.fem.params import ModelParams
@@ -34,11 +35,24 @@ if TYPE_CHECKING:
     from physanim.fem.actuation import Actuation
 
 
+class DriveMode(BaseModel):
+    """Of ``simulate.drive``, what the inverse step needs: whether the drive uses it (only the
+    mode enters the key, so no other drive setting runs the inverse step again)."""
+
+    model_config = ConfigDict(extra="ignore")
+    mode: str = Field(
+        DriveParams.model_fields["mode"].default,
+        description="simulate's drive; the inverse step runs only for 'actuation' (any other "
+        "mode stores an empty actuation at once)",
+    )
+
+
 class ActuateParams(ModelParams):
     """The inverse step's settings, from the ``simulate`` section: the FEM model's (element,
-    law, solver), the mandible's motion and the fit's."""
+    law, solver), the drive's mode, the mandible's motion and the fit's."""
 
     model_config = ConfigDict(extra="forbid")
+    drive: DriveMode = Field(default_factory=DriveMode, description="simulate's drive (its mode)")
     jaw: JawParams = Field(default_factory=JawParams, description="mandible motion")
     actuation: ActuationParams = Field(
         default_factory=ActuationParams, description="the inverse step (stage 'actuate')"
@@ -123,6 +137,8 @@ def compute(
     from physanim.fem.materials import TetMaterials
     from physanim.fem.model import build_model
 
+    if params.drive.mode != "actuation":
+        return _not_needed(len(track.points), params.drive.mode)
     report = ctx.progress("actuate")
     report(0, 3)
     t_start = t0 = time.perf_counter()
@@ -174,6 +190,27 @@ def compute(
         regions=list(REGIONS),
         radius_m=basis.radius,
         summary=summary,
+    )
+
+
+def _not_needed(n_frames: int, mode: str) -> ActuateOutput:
+    """The empty actuation of ``n_frames`` frames that a drive other than 'actuation' reads
+    (it applies none): the inverse step costs nothing where it is not used."""
+    from physanim.evaluate.fidelity import REGIONS
+
+    nothing = np.full(n_frames, np.nan)
+    return ActuateOutput(
+        coefficients=np.zeros((n_frames, 0, 5)),
+        centres=np.zeros((0, 3)),
+        patch_region=np.zeros(0, np.int8),
+        skin_nodes=np.zeros(0, np.int64),
+        residual=nothing,
+        residual_regions=np.full((n_frames, len(REGIONS)), np.nan),
+        passive=nothing,
+        regions=list(REGIONS),
+        summary={
+            "inverse_step": f"not run: simulate.drive.mode is {mode!r}; it runs for 'actuation'"
+        },
     )
 
 
