@@ -11,7 +11,8 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    own (``visible_tolerance_m``) and the surface faces the camera (``min_cos_view``). Its
    neutral position is lifted from the measured depth, so a constant offset between the scan
    and the measured surface cancels from the motion.
-2. **Flow.** OpenCV's DIS optical flow from the neutral colour frame to frame t, and back; the
+2. **Flow.** OpenCV's DIS optical flow from the neutral colour frame to frame t, and back, in
+   the window the face reaches under the tracker's head poses (:func:`flow_window`); the
    vertex's pixel at t is its neutral pixel plus the flow. Where the backward flow does not
    return it within ``max_flow_error_px`` (occlusion, the inside of the open mouth, flow
    failure) the vertex is not observed at t.
