@@ -1,7 +1,9 @@
 """Which process owns what: liveness of owner pids, and clean-up after killed physanim runs.
 
 A physanim process marks the processes it starts (Prefect's temporary API server, Dask
-workers, render workers) by putting ``PHYSANIM_OWNER=<pid>@<start>`` in their environment;
+workers, render workers) by putting ``PHYSANIM_OWNER=<pid>@<start>`` in their environment
+(``<start>``: the owner's start in clock ticks since boot, exact and untouched by changes of
+the wall clock, which a Unix start time computed from ``/proc/stat``'s boot time is not);
 temporary folders carry the owner's pid in their name (``physanim-<what>-<pid>-<random>``).
 When the owner was killed (SIGKILL leaves no chance to clean up), the next run finds these by
 the owner's pid and stops or removes them.  Start times (Linux ``/proc``) guard against a
@@ -75,11 +77,20 @@ def process_alive(pid: int, started_before: float | None = None) -> bool:
     return True
 
 
+def start_ticks(pid: int) -> int | None:
+    """Start of process ``pid`` in clock ticks since boot (exact); None when not running."""
+    fields = _stat_fields(pid)
+    try:
+        return int(fields[19]) if fields is not None else None
+    except (ValueError, IndexError):
+        return None
+
+
 def owner_token(pid: int | None = None) -> str:
-    """``<pid>@<start time>`` of a process (default: this one), the value of OWNER_ENV."""
+    """``<pid>@<start ticks>`` of a process (default: this one), the value of OWNER_ENV."""
     pid = os.getpid() if pid is None else pid
-    started = start_time(pid)
-    return f"{pid}@{started:.0f}" if started is not None else str(pid)
+    started = start_ticks(pid)
+    return f"{pid}@{started}" if started is not None else str(pid)
 
 
 def owner_alive(token: str) -> bool:
@@ -91,8 +102,8 @@ def owner_alive(token: str) -> bool:
         return False
     if not process_alive(pid):
         return False
-    now = start_time(pid)
-    return not started or now is None or abs(now - float(started)) < 2.0
+    now = start_ticks(pid)
+    return not started.isdigit() or now is None or now == int(started)
 
 
 def mark_children() -> None:
@@ -116,9 +127,19 @@ def _orphans() -> list[tuple[int, str, str]]:
             continue
         prefix = OWNER_ENV.encode() + b"="
         token = next((e[len(prefix) :].decode() for e in env if e.startswith(prefix)), None)
-        if token and not owner_alive(token) and process_alive(int(entry.name)):
+        if token is None or _parent(entry) == token.partition("@")[0]:
+            continue  # not marked, or its owner is its parent: that one still runs
+        if not owner_alive(token) and process_alive(int(entry.name)):
             found.append((int(entry.name), token, cmd.strip()))
     return found
+
+
+def _parent(entry: Path) -> str | None:
+    """The parent pid (as text) of the process whose ``/proc`` folder is ``entry``."""
+    try:
+        return (entry / "stat").read_text().rsplit(")", 1)[1].split()[1]
+    except (OSError, IndexError):
+        return None
 
 
 def stop_orphans(grace_s: float = 5.0) -> list[str]:

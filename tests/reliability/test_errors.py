@@ -15,7 +15,14 @@ from pathlib import Path
 from typer.testing import CliRunner
 
 from cli.app import app
-from physanim.processes import process_alive, start_time
+from physanim.processes import (
+    OWNER_ENV,
+    _orphans,
+    owner_alive,
+    owner_token,
+    process_alive,
+    start_time,
+)
 from physanim.store import StageStore
 from physanim.store.stage_store import TMP
 from tests.commands import ROOT, TOY, physanim
@@ -101,6 +108,22 @@ def test_the_next_run_stops_orphans_and_removes_temporary_folders(
                 folder.rmdir()
         if process_alive(child):
             os.kill(child, signal.SIGKILL)
+
+
+def test_a_run_whose_owner_runs_is_no_orphan() -> None:
+    """The owner token names the start in clock ticks (a wall-clock step cannot make a live
+    owner look dead), and a marked process whose parent is its owner is never stopped, even
+    when the token's start does not match (a CI failure: a run stopped its sibling runs)."""
+    assert owner_alive(owner_token())
+    assert not owner_alive(f"{os.getpid()}@{int(owner_token().partition('@')[2]) + 100}")
+    env = {**os.environ, OWNER_ENV: f"{os.getpid()}@1"}  # this process, a wrong start
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"], env=env)
+    try:
+        time.sleep(0.3)
+        assert child.pid not in [pid for pid, _, _ in _orphans()]
+    finally:
+        child.kill()
+        child.wait()
 
 
 def test_a_zombie_or_reused_pid_does_not_keep_a_partial_output(tmp_path: Path) -> None:
