@@ -8,7 +8,9 @@ FEM (the render's FEM tiles, ``physanim.mesh.embed``), and ``capture``, the capt
 the report shows them. Each becomes a USD stage with point time samples
 (``<variant>.usdc``), a glTF binary with a morph-target basis (``<variant>.glb``) and, with
 ``export.alembic``, an Alembic file written by Blender (``<variant>.abc``), in this output's
-files/ (``physanim show export`` prints where). Version history: CHANGELOG.md.
+files/ (``physanim show export`` prints where). A variant whose motion, settings and writers
+are those of an earlier export (the capture, after a material edit) has its files copied from
+the run directory's ``cache/export`` instead of written again. Version history: CHANGELOG.md.
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ def compute(
     """USD, glTF (and Alembic) files of the FEM skin and of the captured scan."""
     from physanim.export import require
     from physanim.export.animation import MeshAnimation
-    from physanim.export.files import export_files
+    from physanim.export.files import cached_export_files
     from physanim.mesh.embed import embedded_displacements
     from physanim.store.file_cache import FileCache
 
@@ -71,11 +73,13 @@ def compute(
     )  # fmt: skip
     motion = {"fem": fem_skin, "capture": dense.motion}
     progress = ctx.progress("export")
+    # the files by their content: a material edit writes the FEM's anew, copies the capture's
+    files = FileCache(ctx.dataset.run_dir / "cache" / "export", keep=4 * (3 + params.alembic))
     written = {}
     for i, (name, doc) in enumerate(VARIANTS.items()):
         progress(i, len(VARIANTS))
         animation = MeshAnimation(name, motion[name][...], align.scan_faces, float(track.fps))
-        written[name] = export_files(animation, ctx.files_dir, params, doc)
+        written[name] = cached_export_files(animation, ctx.files_dir, params, doc, files)
     progress(len(VARIANTS), len(VARIANTS))
     warnings = [
         f"{w.glb.name}: {w.rms_mm:.3f} mm RMS from the full animation with "
