@@ -5,8 +5,9 @@ Per frame: the captured colour frame with the tracked landmarks, the CANDIDE-sty
 captured scan and the FEM skin coloured by displacement from the front, then the captured
 scan and the FEM skin from the side (``side_view_deg``), in one panel
 (``physanim.render.face_panel``); PNG frames, an MP4 at the capture frame rate and matplotlib
-plots (``physanim.render.plots.plot_face_run``), all in this output's files/. The fit and
-captured-scan tiles come from the ``tiles`` stage. Version history: CHANGELOG.md.
+plots (``physanim.render.plots.plot_face_run``), all in this output's files/. The cropped
+capture, the fit and the captured-scan tiles come from the ``tiles`` stage. Version history:
+CHANGELOG.md.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from physanim.pipeline import StageContext, StageOutput, StageSpec
 from physanim.render.face_panel import PanelParams
 from tasks.align import AlignOutput
 from tasks.evaluate import EvaluateOutput
-from tasks.ingest import IngestOutput
 from tasks.simulate import SimulateOutput
 from tasks.tetra import TetraOutput
 from tasks.tiles import TilesOutput
@@ -48,7 +48,6 @@ class RenderOutput(StageOutput):
 
 def compute(
     params: PanelParams,
-    ingest: IngestOutput,
     track: TrackOutput,
     align: AlignOutput,
     tetra: TetraOutput,
@@ -62,7 +61,7 @@ def compute(
     from physanim.render.plots import plot_face_run
 
     footage = FaceFootage(
-        colour=ingest.color, uv=track.uv, confidence=track.confidence, fps=float(track.fps),
+        capture=tiles.capture, fps=float(track.fps),
         motion_tiles=tiles.by_title(), scan_vertices=align.scan_vertices,
         scan_faces=align.scan_faces, scan_side=align.scan_side, nodes=tetra.nodes,
         tets=tetra.tets, mouth=align.mouth(),
@@ -92,7 +91,7 @@ def compute(
 SPEC = StageSpec.typed(
     "render",
     compute,
-    version="7",
+    version="8",
     doc="panel video (capture | fit | captured scan | FEM | scan and FEM from the side), "
     "symmetry / mouth / energy plots",
     files=FILES,

@@ -94,12 +94,14 @@ def render_views(
     backend: Backend = "auto",
     isolate: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    threads: int | None = None,
 ) -> np.ndarray:
     """An animated mesh seen from each of ``views_deg`` (V,) camera azimuths, degrees (e.g.
     0 frontal, 70 three-quarter towards the actor's left; added to the turntable's): (V, T,
     H, W, 3) uint8, by one renderer (one worker process) that shades each frame once for all
-    its views; ``progress`` counts the V * T images. The other arguments as in
-    :func:`render_sequence`."""
+    its views; ``progress`` counts the V * T images; ``threads`` the worker's rasteriser
+    threads (None: one per core; fewer when several workers render at once). The other
+    arguments as in :func:`render_sequence`."""
     vertices = np.asarray(vertices, dtype=np.float64)
     if vertices.ndim != 3 or vertices.shape[2] != 3:
         raise ValueError(f"vertices must be (T, N, 3) metres, got shape {vertices.shape}")
@@ -117,7 +119,7 @@ def render_views(
     settings = dict(size=size, colour_map=colour_map, colour=colour)
     if backend in ("auto", "vtk") and isolate:
         try:
-            return render_isolated(vertices, faces, per_frame, cameras, settings, progress)
+            return render_isolated(vertices, faces, per_frame, cameras, settings, progress, threads)
         except RuntimeError as exc:
             if backend == "vtk":
                 raise

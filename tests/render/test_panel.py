@@ -121,10 +121,8 @@ def test_panels_crop_the_face_and_write_every_frame(tmp_path):
     frames = np.array([0, 2])
     panels = []
     for source in (colour, lazy):
-        footage = FaceFootage(
-            source, uv, np.ones((4, 2)), 10.0, {}, *[None] * 6, np.zeros((4, 1, 3))
-        )
-        captured = capture_tiles(footage, frames, (120, 160))
+        captured = capture_tiles(source, uv, np.ones((4, 2)), frames, (120, 160))
+        footage = FaceFootage(captured, 10.0, {}, *[None] * 6, np.zeros((4, 1, 3)))
         panels.append(compose_panels(footage, frames, captured, tiles))
     assert len(panels[0]) == 2 and all((a == b).all() for a, b in zip(*panels, strict=True))
     # crop rows 88-152, cols 136-184 (half height 1.6 / 2 * 40 px, width 3/4 of it), scaled

@@ -161,4 +161,4 @@ def test_tiles_key_reads_the_truth_only_for_the_error_colouring(tmp_path: Path):
 
     ctx = SimpleNamespace(dataset_dir=tmp_path / "elsewhere", progress=lambda name: None)
     with pytest.raises(ValueError, match="no truth .*elsewhere/ground_truth.zarr"):
-        tiles_stage.compute(TileParams(scan_colour="error"), None, None, ctx)
+        tiles_stage.compute(TileParams(scan_colour="error"), None, None, None, None, ctx)
