@@ -127,19 +127,13 @@ def _orphans() -> list[tuple[int, str, str]]:
             continue
         prefix = OWNER_ENV.encode() + b"="
         token = next((e[len(prefix) :].decode() for e in env if e.startswith(prefix)), None)
-        if token is None or _parent(entry) == token.partition("@")[0]:
+        fields = _stat_fields(int(entry.name))
+        parent = fields[1] if fields is not None else None  # the field after the state
+        if token is None or parent == token.partition("@")[0]:
             continue  # not marked, or its owner is its parent: that one still runs
         if not owner_alive(token) and process_alive(int(entry.name)):
             found.append((int(entry.name), token, cmd.strip()))
     return found
-
-
-def _parent(entry: Path) -> str | None:
-    """The parent pid (as text) of the process whose ``/proc`` folder is ``entry``."""
-    try:
-        return (entry / "stat").read_text().rsplit(")", 1)[1].split()[1]
-    except (OSError, IndexError):
-        return None
 
 
 def stop_orphans(grace_s: float = 5.0) -> list[str]:
