@@ -36,8 +36,9 @@ if TYPE_CHECKING:
 
 
 class DriveMode(BaseModel):
-    """Of ``simulate.drive``, what the inverse step needs: whether the drive uses it (only the
-    mode enters the key, so no other drive setting runs the inverse step again)."""
+    """Of ``simulate.drive``, what the inverse step needs: whether the drive uses it, and the
+    landmark patches it also fits (only these enter the key, so no other drive setting runs
+    the inverse step again)."""
 
     model_config = ConfigDict(extra="ignore")
     mode: str = Field(
@@ -45,6 +46,17 @@ class DriveMode(BaseModel):
         description="simulate's drive; the inverse step runs only for 'actuation' (any other "
         "mode stores an empty actuation at once)",
     )
+    landmarks: list[str] | None = DriveParams.model_fields["landmarks"]
+    exclude: list[str] = DriveParams.model_fields["exclude"]
+    radius_m: float = DriveParams.model_fields["radius_m"]
+
+    def patches(self) -> DriveParams:
+        """The landmark-spring drive of these landmarks and patches (its patches and targets
+        are what the inverse step reads)."""
+        return DriveParams(
+            mode="landmarks", landmarks=self.landmarks, exclude=self.exclude,
+            radius_m=self.radius_m,
+        )  # fmt: skip
 
 
 class ActuateParams(ModelParams):
@@ -118,6 +130,29 @@ def stage_drive(
     )  # fmt: skip
 
 
+def with_landmarks(
+    params: ActuateParams,
+    landmarks: FaceDrive,
+    nodes: np.ndarray,
+    targets: np.ndarray,
+    weights: np.ndarray,
+    areas: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The observed nodes (S,), targets (T, S, 3) m and weights (T, S) of the captured scan
+    with the skin nodes of the landmark patches of ``landmarks`` (a landmark-spring drive)
+    appended, each towards its landmark's motion with weight ``landmark_weight`` times its
+    skin area ``areas`` (N,) m^2 (a node may appear twice: two rows of the fit)."""
+    springs, factor = landmarks.springs, params.actuation.landmark_weight
+    if factor == 0 or springs is None:
+        return nodes, targets, weights
+    extra = np.broadcast_to(factor * areas[springs.nodes], (len(weights), len(springs.nodes)))
+    return (
+        np.r_[nodes, springs.nodes],
+        np.concatenate([targets, springs.targets], axis=1),
+        np.concatenate([weights, extra], axis=1),
+    )
+
+
 def compute(
     params: ActuateParams,
     track: TrackOutput,
@@ -151,7 +186,14 @@ def compute(
     binding = SkinBinding.of(tissue, align.mouth(), (align.scan_vertices, align.scan_faces))
     motion, confidence = captured_motion(dense)
     targets = binding.displacements(motion)
-    weights = skin_areas(nodes, tets, tetra.skin)[binding.nodes] * binding.values(confidence)
+    fill = params.actuation.filled_weight
+    trust = fill + (1.0 - fill) * binding.values(confidence)
+    areas = skin_areas(nodes, tets, tetra.skin)
+    weights = areas[binding.nodes] * trust
+    observed, targets, weights = with_landmarks(
+        params, stage_drive(track, align, tetra, params.drive.patches(), params.jaw),
+        binding.nodes, targets, weights, areas,
+    )  # fmt: skip
     t_drive = time.perf_counter() - t0
     report(1, 3)
 
@@ -165,7 +207,7 @@ def compute(
     t_model = time.perf_counter() - t0
     report(2, 3)
     fit = fit_actuation(
-        model, basis, conditions, binding.nodes, targets, weights,
+        model, basis, conditions, observed, targets, weights,
         fit_params.stress_cost_mm_per_kPa * 1e-6, fit_params.rate_cost_mm_per_kPa * 1e-6,
         params.solver, fit_params.robust_mm * 1e-3,
     )  # fmt: skip
@@ -173,11 +215,13 @@ def compute(
 
     landmarks = align.landmark_positions()
     labels = face_regions(nodes[binding.nodes], landmarks)
-    residual = motion_fidelity(fit.fitted, targets, labels)
-    passive = motion_fidelity(fit.passive, targets, labels).overall
+    n = len(binding.nodes)  # the residual on the captured scan's rows (no landmark rows)
+    captured, fitted = targets[:, :n], fit.fitted[:, :n]
+    residual = motion_fidelity(fitted, captured, labels)
+    passive = motion_fidelity(fit.passive[:, :n], captured, labels).overall
     seconds = {"drive": t_drive, "model": t_model, **fit.seconds}
     seconds["total"] = time.perf_counter() - t_start
-    summary = _summary(fit, targets, weights, residual, passive, seconds)
+    summary = _summary(fitted, captured, weights[:, :n], residual, passive, seconds, fit)
     summary.update(patches=basis.n_patches, skin_nodes=len(binding.nodes))
     return ActuateOutput(
         coefficients=fit.coefficients,
@@ -215,8 +259,8 @@ def _not_needed(n_frames: int, mode: str) -> ActuateOutput:
 
 
 def _summary(
-    fit: Any, targets: np.ndarray, weights: np.ndarray, residual: Any, passive: np.ndarray,
-    seconds: dict[str, float],
+    fitted: np.ndarray, targets: np.ndarray, weights: np.ndarray, residual: Any,
+    passive: np.ndarray, seconds: dict[str, float], fit: Any,
 ) -> dict[str, Any]:  # fmt: skip
     """The stage summary: the fit's relative residual overall and per region at the frame of
     the largest captured motion and at its worst frame, the weighted RMS misfit (mm), the
@@ -227,7 +271,7 @@ def _summary(
         return None if not np.isfinite(x) else round(float(x), 4)
 
     moved = np.sqrt(np.einsum("ts,tsc->t", weights, targets**2) / weights.sum(axis=1))
-    misfit = np.einsum("ts,tsc->t", weights, (fit.fitted - targets) ** 2) / weights.sum(axis=1)
+    misfit = np.einsum("ts,tsc->t", weights, (fitted - targets) ** 2) / weights.sum(axis=1)
     peak = int(moved.argmax())
     worst = int(np.nanargmax(residual.overall)) if np.isfinite(residual.overall).any() else None
     return {

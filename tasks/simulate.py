@@ -3,13 +3,14 @@
 The boundary conditions come from the library (``physanim.face.drive``): skull nodes fixed,
 mandible nodes turned by the jaw rotation estimated from the tracked landmarks, and the skin
 moved by the active stress the ``actuate`` stage fitted to the capture (``drive.mode:
-actuation``, scaled per face region by ``drive.actuation_scale``), pulled by landmark springs
-(default), by the kinematic scan, or prescribed at single nodes (the seed,
-``configs/drives/seed.yaml``), chosen by ``physanim.face.performance``. They, the actuation
-and the tissue mesh and materials form a :class:`~physanim.fem.problem.FemProblem`, solved by
-``physanim.fem.simulate`` at the capture frame rate, or with ``simulate.reduced.enabled`` in a
-reduced (POD) basis built from a full run of a basis material (``physanim.fem.preview``), for
-fast previews of material edits. Version history: CHANGELOG.md.
+actuation``, the default, scaled per face region by ``drive.actuation_scale``), pulled by
+landmark springs (``configs/drives/landmarks.yaml``), by the kinematic scan, or prescribed at
+single nodes (the seed, ``configs/drives/seed.yaml``), chosen by
+``physanim.face.performance``. They, the actuation and the tissue mesh and materials form a
+:class:`~physanim.fem.problem.FemProblem`, solved by ``physanim.fem.simulate`` at the capture
+frame rate, or with ``simulate.reduced.enabled`` in a reduced (POD) basis built from a full run
+of a basis material (``physanim.fem.preview``), for fast previews of material edits.
+Version history: CHANGELOG.md.
 """
 
 from __future__ import annotations
@@ -171,5 +172,5 @@ SPEC = StageSpec.typed(
     compute,
     version="8",
     doc="viscoelastic FEM (Newmark); skull fixed, mandible turned by the estimated jaw, skin "
-    "pulled by the tracked landmarks or moved by the fitted actuation (drive.mode)",
+    "moved by the fitted actuation (default) or pulled by the tracked landmarks (drive.mode)",
 )

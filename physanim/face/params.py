@@ -92,10 +92,10 @@ class DriveParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     mode: Literal["actuation", "landmarks", "kinematic", "prescribed"] = Field(
-        "landmarks",
-        description="'actuation': the skin is moved by the tissue's active stress that the "
-        "'actuate' stage fitted to the captured motion at its basis material, held as the "
-        "material is edited; 'landmarks': each tracked landmark pulls a skin patch by a "
+        "actuation",
+        description="'actuation' (default): the skin is moved by the tissue's active stress "
+        "that the 'actuate' stage fitted to the captured motion at its basis material, held "
+        "as the material is edited; 'landmarks': each tracked landmark pulls a skin patch by a "
         "spring; 'kinematic': every skin node is pulled towards the kinematic scan; "
         "'prescribed': each landmark's nearest skin node follows it exactly (the seed)",
     )
@@ -190,4 +190,23 @@ class ActuationParams(BaseModel):
         le=10.0,
         description="temporal smoothing: an RMS change of the active stress of 1 kPa from one "
         "frame to the next costs as much as an RMS skin misfit of this many mm",
+    )
+    filled_weight: float = Field(
+        0.5,
+        ge=0.0,
+        le=1.0,
+        description="weight of a skin node's captured motion where the capture filled it from "
+        "its neighbours (confidence 0) against one it saw (confidence 1); a node's weight is "
+        "its skin area times filled_weight + (1 - filled_weight) x confidence",
+    )
+    landmark_weight: float = Field(
+        0.0,
+        ge=0.0,
+        le=100.0,
+        description="the tracked landmarks as targets beside the captured scan: each skin node "
+        "of a landmark's patch (simulate.drive.radius_m; the landmarks and exclusions of "
+        "simulate.drive) is also fitted to the landmark's motion, weighted by its skin area "
+        "times this factor (0, default: the captured scan alone); they open the lips further "
+        "where the capture sees them worst (demo, 0.25: lip gap at the jaw drop 11.9 -> "
+        "12.4 mm against the actor's 13.9, the smile's error 0.124 -> 0.128)",
     )
