@@ -32,7 +32,9 @@ from tasks.track import TrackOutput
 
 if TYPE_CHECKING:
     from physanim.face.drive import FaceDrive
-    from physanim.fem.actuation import Actuation
+    from physanim.fem.actuation import Actuation, StressBasis
+    from physanim.fem.boundary import BoundaryConditions
+    from physanim.fem.inverse import ActuationFit
 
 
 class DriveMode(BaseModel):
@@ -75,7 +77,9 @@ class ActuateParams(ModelParams):
 class ActuateOutput(StageOutput):
     """The fitted actuation of T frames over P patches: ``coefficients`` (T, P, 5) Pa of the
     deviatoric stress directions (``physanim.fem.actuation.DEVIATORIC``) of the patches
-    centred at ``centres`` (P, 3) m reaching ``radius_m`` m; ``patch_region`` (P,) int8 index
+    centred at ``centres`` (P, 3) m reaching ``radius_m`` m, lifted along the patches' fourth
+    axis by ``centre_lift`` (P,) m (the tets by ``lip_lift_m`` m times their lip side,
+    ``physanim.fem.actuation.seam_lift``; 0: no lip patches); ``patch_region`` (P,) int8 index
     of each centre's face region into ``regions`` (-1: none); ``skin_nodes`` (S,) the free
     skin nodes fitted; ``residual`` (T,) and ``residual_regions`` (T, len(regions)) the static
     fit's relative displacement error against the captured motion (NaN: nothing moves over
@@ -83,6 +87,7 @@ class ActuateOutput(StageOutput):
 
     coefficients: np.ndarray
     centres: np.ndarray
+    centre_lift: np.ndarray
     patch_region: np.ndarray
     skin_nodes: np.ndarray
     residual: np.ndarray
@@ -90,13 +95,17 @@ class ActuateOutput(StageOutput):
     passive: np.ndarray
     regions: list[str] = field(default_factory=list)
     radius_m: float = 0.0
+    lip_lift_m: float = 0.0
 
-    def actuation(self, nodes: np.ndarray, tets: np.ndarray, drive: DriveParams) -> Actuation:
-        """The actuation over the tet mesh (``nodes`` (N, 3) m, ``tets`` (M, 4), tetra's)
-        with each patch's coefficients times its region's ``drive.actuation_scale``."""
-        from physanim.fem.actuation import Actuation, StressBasis
+    def actuation(self, tetra: TetraOutput, drive: DriveParams) -> Actuation:
+        """The actuation over tetra's mesh with each patch's coefficients times its region's
+        ``drive.actuation_scale``."""
+        from physanim.fem.actuation import Actuation, StressBasis, seam_lift
 
-        basis = StressBasis.patches(nodes, tets, self.centres, self.radius_m)
+        lift = seam_lift(tetra.tets, tetra.side, self.lip_lift_m)
+        basis = StressBasis.patches(
+            tetra.nodes, tetra.tets, self.centres, self.radius_m, lift, self.centre_lift
+        )
         names = [self.regions[r] if r >= 0 else None for r in self.patch_region]
         factors = np.array([drive.scale_of(n) for n in names])
         return Actuation(basis, self.coefficients).scaled(factors)
@@ -166,16 +175,12 @@ def compute(
     from physanim.evaluate.fidelity import REGIONS, face_regions, motion_fidelity
     from physanim.face.drive import skin_areas
     from physanim.face.performance import SkinBinding
-    from physanim.fem.actuation import StressBasis
     from physanim.fem.boundary import BoundaryConditions
-    from physanim.fem.inverse import fit_actuation
-    from physanim.fem.materials import TetMaterials
-    from physanim.fem.model import build_model
 
     if params.drive.mode != "actuation":
         return _not_needed(len(track.points), params.drive.mode)
     report = ctx.progress("actuate")
-    report(0, 3)
+    report(0, 2)
     t_start = t0 = time.perf_counter()
     nodes, tets = tetra.nodes, tetra.tets
     drive = stage_drive(track, align, tetra, DriveParams(mode="actuation"), params.jaw)
@@ -195,23 +200,9 @@ def compute(
         binding.nodes, targets, weights, areas,
     )  # fmt: skip
     t_drive = time.perf_counter() - t0
-    report(1, 3)
-
-    t0 = time.perf_counter()
-    fit_params, m = params.actuation, params.actuation.basis_material
-    materials = TetMaterials.uniform(
-        len(tets), E=m.E_kPa * 1e3, nu=m.nu, eta=m.eta_Pa_s, rho=m.rho_kg_m3, **m.fields
-    )
-    model = build_model(nodes, tets, materials, params)
-    basis = StressBasis.covering(nodes, tets, fit_params.patch_spacing_m)
-    t_model = time.perf_counter() - t0
-    report(2, 3)
-    fit = fit_actuation(
-        model, basis, conditions, observed, targets, weights,
-        fit_params.stress_cost_mm_per_kPa * 1e-6, fit_params.rate_cost_mm_per_kPa * 1e-6,
-        params.solver, fit_params.robust_mm * 1e-3,
-    )  # fmt: skip
-    report(3, 3)
+    report(1, 2)
+    fit, basis, t_model = inverse_step(params, tetra, conditions, observed, targets, weights)
+    report(2, 2)
 
     landmarks = align.landmark_positions()
     labels = face_regions(nodes[binding.nodes], landmarks)
@@ -226,6 +217,7 @@ def compute(
     return ActuateOutput(
         coefficients=fit.coefficients,
         centres=basis.centres,
+        centre_lift=basis.lift,
         patch_region=face_regions(basis.centres, landmarks),
         skin_nodes=binding.nodes,
         residual=residual.overall,
@@ -233,8 +225,51 @@ def compute(
         passive=passive,
         regions=list(REGIONS),
         radius_m=basis.radius,
+        lip_lift_m=lip_lift(params),
         summary=summary,
     )
+
+
+def inverse_step(
+    params: ActuateParams,
+    tetra: TetraOutput,
+    conditions: BoundaryConditions,
+    observed: np.ndarray,
+    targets: np.ndarray,
+    weights: np.ndarray,
+) -> tuple[ActuationFit, StressBasis, float]:
+    """The fitted actuation (``physanim.fem.inverse.fit_actuation``) of the tetra mesh at the
+    basis material under ``conditions``, moving the ``observed`` (S,) skin nodes to
+    ``targets`` (T, S, 3) m with ``weights`` (T, S); its stress basis, and the seconds spent
+    building the model and the basis."""
+    from physanim.fem.actuation import StressBasis, seam_lift
+    from physanim.fem.inverse import fit_actuation
+    from physanim.fem.materials import TetMaterials
+    from physanim.fem.model import build_model
+
+    t0 = time.perf_counter()
+    fit_params, m = params.actuation, params.actuation.basis_material
+    materials = TetMaterials.uniform(
+        len(tetra.tets), E=m.E_kPa * 1e3, nu=m.nu, eta=m.eta_Pa_s, rho=m.rho_kg_m3, **m.fields
+    )
+    model = build_model(tetra.nodes, tetra.tets, materials, params)
+    lift = seam_lift(tetra.tets, tetra.side, lip_lift(params))
+    basis = StressBasis.covering(tetra.nodes, tetra.tets, fit_params.patch_spacing_m, lift)
+    t_model = time.perf_counter() - t0
+    fit = fit_actuation(
+        model, basis, conditions, observed, targets, weights,
+        fit_params.stress_cost_mm_per_kPa * 1e-6, fit_params.rate_cost_mm_per_kPa * 1e-6,
+        params.solver, fit_params.robust_mm * 1e-3,
+    )  # fmt: skip
+    return fit, basis, t_model
+
+
+def lip_lift(params: ActuateParams) -> float:
+    """The lip tets' offset along the patches' fourth axis, m (0 without lip patches)."""
+    from physanim.fem.actuation import SEAM_LIFT_PER_SPACING
+
+    fit = params.actuation
+    return SEAM_LIFT_PER_SPACING * fit.patch_spacing_m if fit.lip_patches else 0.0
 
 
 def _not_needed(n_frames: int, mode: str) -> ActuateOutput:
@@ -246,6 +281,7 @@ def _not_needed(n_frames: int, mode: str) -> ActuateOutput:
     return ActuateOutput(
         coefficients=np.zeros((n_frames, 0, 5)),
         centres=np.zeros((0, 3)),
+        centre_lift=np.zeros(0),
         patch_region=np.zeros(0, np.int8),
         skin_nodes=np.zeros(0, np.int64),
         residual=nothing,
@@ -296,7 +332,7 @@ def _summary(
 SPEC = StageSpec.typed(
     "actuate",
     compute,
-    version="1",
+    version="2",
     doc="inverse step: per-frame active stress with which the FEM at a fixed basis material "
     "reproduces the captured skin motion (simulate's jaw, model and actuation settings)",
     section="simulate",

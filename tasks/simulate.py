@@ -110,7 +110,7 @@ def simulate_inputs(
         drive.prescribed_traj, 1.0 / float(track.fps), springs=drive.springs,
     )  # fmt: skip
     if params.drive.mode == "actuation":
-        problem = problem.with_actuation(actuate.actuation(tetra.nodes, tetra.tets, params.drive))
+        problem = problem.with_actuation(actuate.actuation(tetra, params.drive))
     return problem, drive
 
 

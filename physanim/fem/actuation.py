@@ -77,8 +77,14 @@ def model_force_operator(model: FemModel) -> sp.csr_matrix:
     return stress_force_operator(model.grads, model.volumes, model.tets, len(model.nodes))
 
 
+#: a lip tet's offset along the patches' fourth axis, times the centres' spacing: a patch's
+#: reach, so a patch weighs tets of one side only (the upper lip, the lower lip or the rest):
+#: none spans the lip seam, each lip gets patches of its own
+SEAM_LIFT_PER_SPACING = RADIUS_PER_SPACING
+
+
 def covering_centres(points: NDArray, spacing: float) -> NDArray:
-    """Indices (P,) of patch centres among ``points`` (M, 3) m by farthest-point sampling,
+    """Indices (P,) of patch centres among ``points`` (M, D) m by farthest-point sampling,
     from the point nearest their mean, until every point lies within ``spacing`` m of one."""
     p = np.asarray(points, dtype=np.float64)
     first = int(np.argmin(np.linalg.norm(p - p.mean(axis=0), axis=1)))
@@ -90,44 +96,80 @@ def covering_centres(points: NDArray, spacing: float) -> NDArray:
     return np.asarray(chosen, dtype=np.int64)
 
 
+def seam_lift(tets: NDArray, node_side: NDArray, height: float) -> NDArray:
+    """Each tet's offset (M,) m along the patches' fourth axis: ``height`` m on the upper
+    lip, minus that on the lower lip, 0 elsewhere (the sign of the sum of its nodes' lip sides
+    ``node_side`` (N,), as :mod:`physanim.mesh.seam` labels them: 1 upper, -1 lower, 0
+    neither). At ``SEAM_LIFT_PER_SPACING`` times the patches' spacing no patch spans two
+    sides."""
+    side = np.sign(np.asarray(node_side, dtype=np.float64)[np.asarray(tets)].sum(axis=1))
+    return height * side
+
+
+def _lifted(points: NDArray, lift: NDArray | None) -> NDArray:
+    """Points (K, 3) m with their fourth coordinate ``lift`` (K,) m appended (0 without)."""
+    p = np.asarray(points, dtype=np.float64)
+    return np.c_[p, np.zeros(len(p)) if lift is None else np.asarray(lift, dtype=np.float64)]
+
+
 @dataclass(frozen=True)
 class StressBasis:
     """Active stress fields over M tets spanned by P patches x the 5 ``DEVIATORIC``
     directions: sigma_a (M, 6) = weights @ (c @ DEVIATORIC) for coefficients c (P, 5) Pa.
 
-    ``weights`` (M, P) CSR, a partition of unity (rows sum to 1); ``centres`` (P, 3) m;
-    ``radius`` m, the reach of each patch."""
+    ``weights`` (M, P) CSR, a partition of unity (rows sum to 1); ``centres`` (P, 3) m and
+    their offsets ``lift`` (P,) m along a fourth axis (:func:`seam_lift`: tets apart in it are
+    farther apart, so a patch need not span the lip seam); ``radius`` m, each patch's reach
+    in those four coordinates."""
 
     weights: sp.csr_matrix
     centres: NDArray
     radius: float
+    lift: NDArray
 
     @classmethod
-    def patches(cls, nodes: NDArray, tets: NDArray, centres: NDArray, radius: float) -> StressBasis:
-        """Patches of ``radius`` m around ``centres`` (P, 3) m over the tets' centroids;
-        ValueError when a tet lies in no patch."""
-        points = np.asarray(nodes, dtype=np.float64)[np.asarray(tets)].mean(axis=1)
-        centres = np.asarray(centres, dtype=np.float64)
-        near = cKDTree(centres).sparse_distance_matrix(
+    def patches(
+        cls,
+        nodes: NDArray,
+        tets: NDArray,
+        centres: NDArray,
+        radius: float,
+        tet_lift: NDArray | None = None,
+        centre_lift: NDArray | None = None,
+    ) -> StressBasis:
+        """Patches of ``radius`` m around ``centres`` (P, 3) m over the tets' centroids, with
+        the tets' and the centres' fourth coordinates ``tet_lift`` (M,) and ``centre_lift``
+        (P,) m (0 without); ValueError when a tet lies in no patch."""
+        points = _lifted(
+            np.asarray(nodes, dtype=np.float64)[np.asarray(tets)].mean(axis=1), tet_lift
+        )
+        lifted = _lifted(centres, centre_lift)
+        near = cKDTree(lifted).sparse_distance_matrix(
             cKDTree(points), radius, output_type="ndarray"
         )
         w = patch_weights(near["v"], radius)
-        weights = sp.csr_matrix((w, (near["j"], near["i"])), shape=(len(points), len(centres)))
+        weights = sp.csr_matrix((w, (near["j"], near["i"])), shape=(len(points), len(lifted)))
         total = np.asarray(weights.sum(axis=1)).ravel()
         if np.any(total <= 0):
             raise ValueError(
                 f"{int((total <= 0).sum())} tets lie in no patch: radius {radius} m is too "
                 "small for these centres"
             )
-        return cls(sp.diags(1.0 / total) @ weights, centres, float(radius))
+        return cls(sp.diags(1.0 / total) @ weights, lifted[:, :3], float(radius), lifted[:, 3])
 
     @classmethod
-    def covering(cls, nodes: NDArray, tets: NDArray, spacing: float) -> StressBasis:
+    def covering(
+        cls, nodes: NDArray, tets: NDArray, spacing: float, tet_lift: NDArray | None = None
+    ) -> StressBasis:
         """Patches centred on tet centroids at most ``spacing`` m from every centroid
-        (:func:`covering_centres`), each reaching ``RADIUS_PER_SPACING`` times that."""
-        points = np.asarray(nodes, dtype=np.float64)[np.asarray(tets)].mean(axis=1)
-        centres = points[covering_centres(points, spacing)]
-        return cls.patches(nodes, tets, centres, RADIUS_PER_SPACING * spacing)
+        (:func:`covering_centres`, in the four coordinates with ``tet_lift`` (M,) m), each
+        reaching ``RADIUS_PER_SPACING`` times that."""
+        centroids = np.asarray(nodes, dtype=np.float64)[np.asarray(tets)].mean(axis=1)
+        points = _lifted(centroids, tet_lift)
+        at = covering_centres(points, spacing)
+        return cls.patches(
+            nodes, tets, centroids[at], RADIUS_PER_SPACING * spacing, tet_lift, points[at, 3]
+        )
 
     @property
     def n_patches(self) -> int:

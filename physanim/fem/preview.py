@@ -102,7 +102,11 @@ def basis_key(
     bc, act = problem.conditions, problem.actuation
     springs = bc.springs
     spring_parts = () if springs is None else (springs.nodes, springs.stiffness, springs.targets)
-    active = () if act is None else (act.basis.centres, act.basis.radius, act.coefficients)
+    active = (
+        ()
+        if act is None
+        else (act.basis.centres, act.basis.lift, act.basis.radius, act.coefficients)
+    )
     shaping = settings.model_dump(mode="json", exclude={"enabled", "estimate"})
     return content_digest(
         BASIS_VERSION, problem.nodes, problem.tets, bc.driven_idx, bc.fixed_idx, bc.values,

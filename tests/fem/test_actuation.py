@@ -6,10 +6,12 @@ from fem_meshes import box_mesh
 
 from physanim.fem.actuation import (
     DEVIATORIC,
+    SEAM_LIFT_PER_SPACING,
     Actuation,
     StressBasis,
     covering_centres,
     model_force_operator,
+    seam_lift,
 )
 from physanim.fem.assembly import deviatoric_matrix, lame, strain_displacement, volumetric_matrix
 from physanim.fem.boundary import FrameForce
@@ -125,6 +127,31 @@ def test_stress_basis_is_a_smooth_partition_of_unity_covering_the_mesh():
     np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12 * np.abs(f).max())
     np.testing.assert_allclose(np.cross(nodes, f).sum(axis=0), 0.0, atol=1e-13 * np.abs(f).max())
     assert len(covering_centres(centroids, 1.0)) == 1
+
+
+def test_lip_patches_never_span_the_seam_and_still_cover_the_mesh():
+    """With the seam lift, a block split at mid-height into an 'upper lip' band above and a
+    'lower lip' band below (sides 1 and -1 within 8 mm of the seam, 0 beyond): every patch
+    weighs tets of one side only, each lip has patches of its own, and the weights stay a
+    partition of unity; without it some patch spans the seam."""
+    nodes, tets = box_mesh((6, 6, 2), (0.06, 0.06, 0.01))
+    dy = nodes[:, 1] - 0.035
+    side = np.where(np.abs(dy) < 0.008, np.sign(dy), 0).astype(np.int8)
+    spacing = 0.012
+    lift = seam_lift(tets, side, SEAM_LIFT_PER_SPACING * spacing)
+    tet_side = np.sign(side[tets].sum(axis=1))
+    assert (tet_side > 0).any() and (tet_side < 0).any()
+    for lifted in (lift, None):
+        basis = StressBasis.covering(nodes, tets, spacing, lifted)
+        w = basis.weights.toarray() > 0
+        sides = np.array([len(np.unique(tet_side[w[:, p]])) for p in range(basis.n_patches)])
+        assert (sides == 1).all() if lifted is not None else (sides > 1).any()
+        np.testing.assert_allclose(basis.weights.sum(axis=1), 1.0, rtol=1e-12)
+    assert (basis.lift == 0).all()
+    lipped = StressBasis.covering(nodes, tets, spacing, lift)
+    assert (lipped.lift > 0).any() and (lipped.lift < 0).any()
+    rebuilt = StressBasis.patches(nodes, tets, lipped.centres, lipped.radius, lift, lipped.lift)
+    assert abs(rebuilt.weights - lipped.weights).max() < 1e-15
 
 
 def test_frame_forces_add_on_the_union_of_their_dofs():
