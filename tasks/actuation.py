@@ -152,7 +152,7 @@ def with_landmarks(
     appended, each towards its landmark's motion with weight ``landmark_weight`` times its
     skin area ``areas`` (N,) m^2 (a node may appear twice: two rows of the fit)."""
     springs, factor = landmarks.springs, params.actuation.landmark_weight
-    if factor == 0 or springs is None:
+    if springs is None:
         return nodes, targets, weights
     extra = np.broadcast_to(factor * areas[springs.nodes], (len(weights), len(springs.nodes)))
     return (
@@ -195,10 +195,12 @@ def compute(
     trust = fill + (1.0 - fill) * binding.values(confidence)
     areas = skin_areas(nodes, tets, tetra.skin)
     weights = areas[binding.nodes] * trust
-    observed, targets, weights = with_landmarks(
-        params, stage_drive(track, align, tetra, params.drive.patches(), params.jaw),
-        binding.nodes, targets, weights, areas,
-    )  # fmt: skip
+    observed = binding.nodes
+    if params.actuation.landmark_weight > 0:  # the landmark drive (a second jaw estimate)
+        observed, targets, weights = with_landmarks(
+            params, stage_drive(track, align, tetra, params.drive.patches(), params.jaw),
+            observed, targets, weights, areas,
+        )  # fmt: skip
     t_drive = time.perf_counter() - t0
     report(1, 2)
     fit, basis, t_model = inverse_step(params, tetra, conditions, observed, targets, weights)
