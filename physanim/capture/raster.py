@@ -89,7 +89,7 @@ def rasterize(
 # as arrays and sorting them by pixel and depth took 41 ms per 640 x 480 view of the demo actor
 # (87k triangles) and 60 ms at 1280 x 960 (this loop: 3 and 9 ms), the largest cost of the
 # demo's generation.
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _zbuffer(
     uv: np.ndarray, z: np.ndarray, faces: np.ndarray, width: int, height: int, near: float,
     face_img: np.ndarray, bary_img: np.ndarray, depth_img: np.ndarray,

@@ -29,8 +29,8 @@ from typing import Literal
 
 import numpy as np
 
-from physanim.render.camera import Camera, frontal_camera, turntable
-from physanim.render.colours import SKIN, ColourMap
+from physanim.cameras import Camera, frontal_camera, turntable
+from physanim.render.colours import BAR_HEIGHT, SKIN, ColourMap
 from physanim.render.isolated import render_isolated
 from physanim.render.surface import check_mesh, render_frames
 
@@ -111,7 +111,9 @@ def render_views(
     per_frame = _frame_scalars(scalars, n_frames)
     if per_frame is not None and colour_map is None:
         colour_map = ColourMap.spanning(per_frame)
-    base = camera or frontal_camera(vertices[0], size, bar=colour_map is not None)
+    base = camera or frontal_camera(
+        vertices[0], size, bar_px=0 if colour_map is None else BAR_HEIGHT
+    )
     az = np.zeros(n_frames) if azimuth_deg is None else np.asarray(azimuth_deg, dtype=np.float64)
     if az.shape != (n_frames,):
         raise ValueError(f"azimuth_deg must be ({n_frames},) degrees, got shape {az.shape}")

@@ -290,9 +290,10 @@ def _titled(title: str, views: NDArray) -> dict[str, NDArray]:
 def _camera(scan_vertices: NDArray, params: TileParams) -> Any:
     """The frontal camera of every 3D tile, framed on the scan (room for the colour bar); the
     side views turn it about its view-up axis."""
-    from physanim.render.camera import frontal_camera
+    from physanim.cameras import frontal_camera
+    from physanim.render.colours import BAR_HEIGHT
 
-    return frontal_camera(scan_vertices, params.size, bar=True)
+    return frontal_camera(scan_vertices, params.size, bar_px=BAR_HEIGHT)
 
 
 def capture_tiles(

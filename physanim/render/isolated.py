@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physanim.render.camera import Camera
+from physanim.cameras import Camera
 from physanim.render.colours import ColourMap
 from physanim.render.surface import render_frames
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from physanim.cameras import Camera, intrinsics, view_matrix
 from physanim.capture.raster import rasterize
-from physanim.render.camera import Camera, view_matrix
 from physanim.render.colours import BACKGROUND
 
 
@@ -27,9 +27,7 @@ def render_numpy(
     width, height = view_size
     view = view_matrix(camera)
     cam_pts = vertices @ view[:, :3].T + view[:, 3]
-    f = (height / 2) / np.tan(np.radians(camera.view_angle) / 2)
-    K = np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
-    raster = rasterize(cam_pts, faces, K, (height, width), near=1e-3)
+    raster = rasterize(cam_pts, faces, intrinsics(camera, view_size), (height, width), near=1e-3)
     mask = raster.mask
     n = raster.interpolate(normals @ view[:, :3].T, faces)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)

@@ -11,8 +11,8 @@ from typing import Literal
 
 import numpy as np
 
+from physanim.cameras import Camera, frontal_camera
 from physanim.mesh.topology import vertex_normals
-from physanim.render.camera import Camera, frontal_camera
 from physanim.render.colours import BAR_HEIGHT, SKIN, ColourMap, colour_bar
 from physanim.render.raster_backend import render_numpy
 from physanim.render.vtk_backend import VtkView
@@ -136,7 +136,7 @@ def render_surface(
     if scalars is not None and colour_map is None:
         colour_map = ColourMap.spanning(scalars)
     if camera is None:
-        camera = frontal_camera(vertices, size, bar=colour_map is not None)
+        camera = frontal_camera(vertices, size, bar_px=0 if colour_map is None else BAR_HEIGHT)
     with SurfaceRenderer(
         faces, len(vertices), size=size, colour_map=colour_map, colour=colour, backend=backend
     ) as renderer:

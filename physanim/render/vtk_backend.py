@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from physanim.render.camera import Camera
+from physanim.cameras import Camera
 from physanim.render.colours import BACKGROUND
 
 

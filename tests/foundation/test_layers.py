@@ -22,7 +22,7 @@ PACKAGES = ["physanim", "tasks", "flows", "cli"]
 #: Layers, lowest first. A unit (a subpackage, or a top-level module of ``physanim``) may
 #: import its own modules and any unit of a LOWER layer, never one of its own layer or above.
 LAYERS: list[set[str]] = [
-    {"__init__", "native", "processes", "transforms", "names", "config", "spline"},  # core
+    {"__init__", "native", "processes", "transforms", "cameras", "names", "config", "spline"},
     {"store", "dynamics"},
     {"pipeline", "muscle"},
     {"mesh"},  # surface / tet geometry, scans, regions, materials per tet

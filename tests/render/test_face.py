@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from matplotlib import colormaps
 
-from physanim.render.camera import frontal_camera, turntable
+from physanim.cameras import frontal_camera, turntable
 from physanim.render.colours import BACKGROUND, BAR_HEIGHT, ColourMap
 from physanim.render.face import render_sequence, render_views
 from physanim.render.surface import render_surface

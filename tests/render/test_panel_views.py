@@ -11,9 +11,9 @@ import pytest
 import zarr
 from matplotlib import colormaps
 
+from physanim.cameras import frontal_camera
 from physanim.evaluate.truth import Truth
 from physanim.pipeline import DatasetParams
-from physanim.render.camera import frontal_camera
 from physanim.render.colours import BACKGROUND, BAR_HEIGHT
 from physanim.render.face_panel import (
     FIT_TITLE,
@@ -44,7 +44,7 @@ def leftmost(mask: np.ndarray) -> np.ndarray:
 def row_heights(vertices: np.ndarray, view_height: int) -> np.ndarray:
     """(view_height,) m: the actor's height y seen on each image row of the tiles' camera
     (framed on ``vertices`` (N, 3) m for a colour bar), at its focal point's depth."""
-    camera = frontal_camera(vertices, SIZE, bar=True)
+    camera = frontal_camera(vertices, SIZE, bar_px=BAR_HEIGHT)
     distance = np.linalg.norm(np.subtract(camera.position, camera.focal_point))
     focal_px = (view_height / 2) / np.tan(np.radians(camera.view_angle) / 2)
     above_centre_px = (view_height - 1) / 2 - np.arange(view_height)
@@ -76,7 +76,7 @@ def test_side_view_shows_the_lower_face_moving_towards_the_camera(actor):
     assert front.shape == side.shape == (2, SIZE[1], SIZE[0], 3)
 
     # the projection's scale: the tile has no colour bar, the camera is framed for one
-    camera = frontal_camera(v, SIZE, bar=True)
+    camera = frontal_camera(v, SIZE, bar_px=BAR_HEIGHT)
     distance = np.linalg.norm(np.subtract(camera.position, camera.focal_point))
     focal_px = (SIZE[1] / 2) / np.tan(np.radians(camera.view_angle) / 2)
     expected_px = PUSH_M * np.sin(np.radians(70.0)) * focal_px / distance

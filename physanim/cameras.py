@@ -1,4 +1,5 @@
-"""The face renders' perspective camera: frontal framing, turntable, world -> camera frame.
+"""The perspective camera of the face renders (and of the evaluation's silhouettes): frontal
+framing, turntable, world -> camera frame, pinhole intrinsics.
 
 Frames: actor frame (+x actor's left, +y up, +z out of the face), so the frontal camera sits
 on +z and the actor's left appears on the image's right, as in a photograph.
@@ -9,8 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-
-from physanim.render.colours import BAR_HEIGHT
 
 
 @dataclass(frozen=True)
@@ -30,17 +29,17 @@ def frontal_camera(
     *,
     margin: float = 1.08,
     view_angle: float = 20.0,
-    bar: bool = False,
+    bar_px: int = 0,
 ) -> Camera:
     """Camera on +z looking at the centre of the bounding box of ``neutral`` (N, 3) m, at the
     distance where the box (times ``margin``) just fits the view of ``size`` = (W, H) pixels
-    (less the colour-bar strip if ``bar``).  Share it over all frames of a sequence."""
+    less a strip of ``bar_px`` rows (a colour bar).  Share it over all frames of a sequence."""
     v = np.asarray(neutral, dtype=np.float64)
     lo, hi = v.min(axis=0), v.max(axis=0)
     centre = 0.5 * (lo + hi)
     half = 0.5 * (hi - lo) * margin
     width, height = size
-    aspect = width / (height - (BAR_HEIGHT if bar else 0))
+    aspect = width / (height - bar_px)
     tan_half = np.tan(np.radians(view_angle) / 2)
     dist = max(half[1], half[0] / aspect) / tan_half + half[2]
     return Camera(
@@ -73,3 +72,11 @@ def view_matrix(camera: Camera) -> np.ndarray:
     down = np.cross(forward, right)
     rot = np.stack([right, down, forward])
     return np.concatenate([rot, -(rot @ pos)[:, None]], axis=1)
+
+
+def intrinsics(camera: Camera, size: tuple[int, int]) -> np.ndarray:
+    """(3, 3) pinhole matrix K, pixels, of ``camera`` for an image of ``size`` = (W, H) pixels
+    (square pixels, the principal point at the image centre)."""
+    width, height = size
+    f = (height / 2) / np.tan(np.radians(camera.view_angle) / 2)
+    return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
