@@ -49,7 +49,8 @@ def fingerprint(dataset: DatasetParams, params: ScanStageParams) -> Mapping[str,
 
 
 def compute(params: ScanStageParams, ctx: StageContext[ScanStageParams]) -> ScanOutput:
-    """Load and clean the scan (metres), close its slits, remesh it isotropically."""
+    """Load and clean the scan (metres), drop its thin parts, close and fair its slits, remesh
+    it isotropically."""
     from physanim.face.scan import load_raw_scan
     from physanim.mesh.remesh import prepare_scan
 
@@ -58,7 +59,8 @@ def compute(params: ScanStageParams, ctx: StageContext[ScanStageParams]) -> Scan
     raw_v, raw_f = load_raw_scan(params.scan, params.scan_units)
     vertices, faces = prepare_scan(
         raw_v, raw_f, params.remesh_edge_length_m, params.remesh_iterations,
-        params.notch_max_gap_m, params.notch_min_depth_m,
+        params.notch_max_gap_m, params.notch_min_depth_m, params.min_width_m,
+        params.notch_fair_band_m,
     )  # fmt: skip
     report(1, 1)
     summary = dict(raw_vertices=len(raw_v), vertices=len(vertices), faces=len(faces))
@@ -68,7 +70,8 @@ def compute(params: ScanStageParams, ctx: StageContext[ScanStageParams]) -> Scan
 SPEC = StageSpec.typed(
     "scan",
     compute,
-    version="1",
-    doc="high-res scan loaded, cleaned, border slits zipped shut, isotropically remeshed",
+    version="2",
+    doc="high-res scan loaded, cleaned, thin parts dropped, border slits zipped shut and "
+    "faired, isotropically remeshed",
     fingerprint=fingerprint,
 )

@@ -21,9 +21,19 @@ REGION_LANDMARKS: dict[str, tuple[str, ...]] = {
 
 
 class ScanParams(BaseModel):
-    """Scan preparation: border slits zipped shut, isotropic remesh (the ``scan`` stage)."""
+    """Scan preparation: thin parts dropped, border slits zipped shut, isotropic remesh (the
+    ``scan`` stage)."""
 
     model_config = ConfigDict(extra="forbid")
+
+    min_width_m: float = Field(
+        0.005,
+        ge=0.0,
+        le=0.03,
+        description="Parts of the scan narrower than this along its border (slivers the "
+        "scanner grazed, such as a strip under the jaw), or joined to the face through a "
+        "narrower neck, are dropped, metres (0 keeps them).",
+    )
 
     remesh_edge_length_m: float = Field(
         0.7e-3,
@@ -48,12 +58,20 @@ class ScanParams(BaseModel):
         le=0.2,
         description="Only slits longer than this along the border are closed, metres.",
     )
+    notch_fair_band_m: float = Field(
+        0.006,
+        ge=0.0,
+        le=0.03,
+        description="The surface within this distance of a zipped slit is faired into a "
+        "smooth ramp, metres: a slit whose sides lay at different depths is otherwise a "
+        "steep wall, drawn as a fold (0 keeps it).",
+    )
 
 
 #: Settings that the ``align`` section had until the ``scan`` stage took them over.
 _MOVED_TO_SCAN = (
     "scan", "scan_units", "remesh_edge_length_m", "remesh_iterations", "notch_max_gap_m",
-    "notch_min_depth_m",
+    "notch_min_depth_m", "min_width_m", "notch_fair_band_m",
 )  # fmt: skip
 
 

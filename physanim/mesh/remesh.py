@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pymeshlab
 
-from physanim.mesh.notches import close_border_notches
-from physanim.mesh.scan_io import FACE_EXTENT_RANGE_M
+from physanim.mesh.notches import close_border_notches, fair_zips
+from physanim.mesh.opening import drop_thin_parts
+from physanim.mesh.scan_io import FACE_EXTENT_RANGE_M, drop_unreferenced, largest_component
 from physanim.mesh.topology import boundary_edges
 
 
@@ -117,9 +118,11 @@ def prepare_scan(
     iterations: int = 6,
     notch_max_gap_m: float = 0.0,
     notch_min_depth_m: float = 0.008,
+    min_width_m: float = 0.0,
+    notch_fair_band_m: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Scan preparation after ``scan_io.clean_scan``: close inner holes and border notches,
-    remesh isotropically.
+    """Scan preparation after ``scan_io.clean_scan``: drop thin parts, close inner holes and
+    border notches, remesh isotropically.
 
     Args:
         vertices: (N, 3) cleaned scan, metres; faces: (M, 3) int.
@@ -128,11 +131,20 @@ def prepare_scan(
         notch_max_gap_m, notch_min_depth_m: slits reaching in from the border narrower than
             the gap and deeper than the depth (metres) are zipped shut
             (:func:`physanim.mesh.notches.close_border_notches`); a gap of 0 keeps them.
+        notch_fair_band_m: the surface within this distance (m) of a zipped notch is faired
+            into a ramp (:func:`physanim.mesh.notches.fair_zips`); 0 keeps the zip's wall.
+        min_width_m: parts of the scan narrower than this along its outer border, or joined
+            to it through a narrower neck, are dropped first
+            (:func:`physanim.mesh.opening.drop_thin_parts`); 0 keeps them.
 
     Returns:
         (V (N', 3) metres, F (M', 3) int64): one component with one open border.
     """
+    faces = drop_thin_parts(vertices, faces, min_width_m)
+    vertices, faces = drop_unreferenced(vertices, largest_component(faces, len(vertices)))
     v, f = close_inner_holes(*remesh_isotropic(vertices, faces, 2.0 * edge_length_m, 2))
     if notch_max_gap_m > 0:
-        f, _ = close_border_notches(v, f, notch_max_gap_m, notch_min_depth_m)
+        zipped, _ = close_border_notches(v, f, notch_max_gap_m, notch_min_depth_m)
+        v = fair_zips(v, zipped, np.arange(len(zipped)) >= len(f), notch_fair_band_m)
+        f = zipped
     return remesh_isotropic(v, f, edge_length_m, iterations)

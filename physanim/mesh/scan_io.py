@@ -88,7 +88,7 @@ def load_scan(path: Path | str, units: Units) -> tuple[np.ndarray, np.ndarray]:
     return vertices, faces
 
 
-def _largest_component(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+def largest_component(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """Faces ``(M', 3)`` of the largest vertex-connected component (by face count)."""
     rows = faces[:, [0, 1, 2]].ravel()
     cols = faces[:, [1, 2, 0]].ravel()
@@ -99,7 +99,7 @@ def _largest_component(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     return faces[face_label == np.argmax(counts)]
 
 
-def _drop_unreferenced(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def drop_unreferenced(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     used, inverse = np.unique(faces, return_inverse=True)
     return vertices[used], inverse.reshape(faces.shape).astype(np.int64)
 
@@ -142,8 +142,8 @@ def clean_scan(
     faces = faces[~repeated & (area2 > 0.0)]
     _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
     faces = faces[np.sort(first)]
-    faces = _largest_component(faces, len(vertices))
-    vertices, faces = _drop_unreferenced(vertices, faces)
+    faces = largest_component(faces, len(vertices))
+    vertices, faces = drop_unreferenced(vertices, faces)
 
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices, face_matrix=faces.astype(np.int32)))
@@ -154,5 +154,5 @@ def clean_scan(
     ms.meshing_remove_unreferenced_vertices()
     mesh = ms.current_mesh()
     vertices = np.asarray(mesh.vertex_matrix(), dtype=np.float64)
-    faces = _largest_component(np.asarray(mesh.face_matrix(), dtype=np.int64), len(vertices))
-    return _drop_unreferenced(vertices, faces)
+    faces = largest_component(np.asarray(mesh.face_matrix(), dtype=np.int64), len(vertices))
+    return drop_unreferenced(vertices, faces)

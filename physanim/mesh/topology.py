@@ -56,6 +56,15 @@ def uniform_laplacian(faces: np.ndarray, n_vertices: int) -> sp.csr_array:
     return (sp.diags_array(deg) - adj).tocsr()
 
 
+def edge_length_graph(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_array:
+    """Symmetric (V, V) sparse graph of the mesh edges weighted by their length, m (for
+    geodesic distances along the edges, ``scipy.sparse.csgraph.dijkstra``)."""
+    e = np.unique(np.sort(directed_edges(faces), axis=1), axis=0)
+    w = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
+    rows, cols = np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]]
+    return sp.coo_array((np.r_[w, w], (rows, cols)), shape=(len(vertices),) * 2).tocsr()
+
+
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(V, 3) unit area-weighted vertex normals of a triangle mesh (zero for isolated vertices)."""
     v = np.asarray(vertices, dtype=np.float64)
