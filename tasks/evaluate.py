@@ -65,7 +65,9 @@ def face_run(
         region_names=materials.region_names,
         mouth=align.mouth(),
         scan_vertices=align.scan_vertices,
+        scan_faces=align.scan_faces,
         scan_side=align.scan_side,
+        scan_parent=align.scan_parent,
         kinematic=dense.motion,
         times=simulate.times,
         fps=track.fps,
@@ -83,14 +85,16 @@ def compute(
     ctx: StageContext[EvaluateParams],
 ) -> EvaluateOutput:
     """Measures per variant (fem, kinematic, tracked); philtrum peaks; with truth: fidelity,
-    lip gap and surface distance per frame."""
+    lip gap, surface distance and surface quality per frame."""
     from physanim.evaluate.face import evaluate_face
     from physanim.evaluate.truth import load_truth
+    from physanim.store.file_cache import FileCache
 
     run = face_run(track, align, dense, tetra, materials, simulate)
     path = ctx.dataset_dir / params.truth
     truth = load_truth(path, run.displacements.shape[0]) if path.exists() else None
-    evaluation, summary = evaluate_face(run, truth, params)
+    embeddings = FileCache(ctx.dataset.run_dir / "cache" / "embeddings", keep=4)
+    evaluation, summary = evaluate_face(run, truth, params, embeddings)
     measures = {f.name: getattr(evaluation, f.name) for f in fields(evaluation)}
     return EvaluateOutput(**measures, summary=summary)
 
@@ -98,8 +102,8 @@ def compute(
 SPEC = StageSpec.typed(
     "evaluate",
     compute,
-    version="7",
+    version="8",
     doc="symmetry cost, mouth corners, lag, philtrum peaks; with truth: motion fidelity per "
-    "region, lip gap, surface distance",
+    "region, lip gap, surface distance, silhouettes and triangle stretch of the moved scan",
     fingerprint=fingerprint,
 )

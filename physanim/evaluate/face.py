@@ -19,8 +19,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from physanim.evaluate.fidelity import Fidelity
 from physanim.evaluate.measures import LandmarkMeasures
+from physanim.evaluate.surfaces import SurfaceQuality
 from physanim.evaluate.truth import Truth
 from physanim.mesh.seam import MouthLine
+from physanim.store.file_cache import FileCache
 
 
 class EvaluateParams(BaseModel):
@@ -51,6 +53,17 @@ class EvaluateParams(BaseModel):
     lip_offset_m: float = Field(
         0.003, gt=0.0, le=0.02, description="lip midline points this far above / below the mouth, m"
     )
+    silhouette_views_deg: tuple[float, ...] = Field(
+        (0.0, 70.0),
+        min_length=1,
+        max_length=8,
+        description="azimuths of the cameras whose silhouettes of the moved scan are compared "
+        "with the truth's, degrees (0: the panel's frontal tile; 70: its side tiles, as "
+        "render.side_view_deg)",
+    )
+    silhouette_size_px: tuple[int, int] = Field(
+        (240, 320), description="width and height of those silhouettes, pixels"
+    )
 
 
 @dataclass(frozen=True)
@@ -62,8 +75,9 @@ class FaceRun:
     variants' landmark trajectories (head frame); ``nodes`` (n, 3) m, ``tets`` (m, 4),
     ``skin`` (n,) bool, ``displacements`` (T, n, 3) m; ``driven`` the node ids the drive
     holds; ``tet_labels`` (m,) into ``region_names``; ``mouth`` the lip seam;
-    ``scan_vertices`` (N, 3) m, ``scan_side`` (N,), ``kinematic`` (T, N, 3) m (a Zarr array
-    or numpy array, read by rows); ``times`` (T,) s of the frames; ``fps`` frames/s.
+    ``scan_vertices`` (N, 3) m, ``scan_faces`` (F, 3), ``scan_side`` (N,), ``scan_parent``
+    (N,) the uncut vertex of each, ``kinematic`` (T, N, 3) m (a Zarr array or numpy array,
+    read by rows); ``times`` (T,) s of the frames; ``fps`` frames/s.
     """
 
     landmark_names: list[str]
@@ -80,7 +94,9 @@ class FaceRun:
     region_names: list[str]
     mouth: MouthLine
     scan_vertices: NDArray
+    scan_faces: NDArray
     scan_side: NDArray
+    scan_parent: NDArray
     kinematic: Any
     times: NDArray
     fps: float
@@ -97,7 +113,9 @@ class FaceEvaluation:
     With ground truth (else None): ``peak_frames`` expression -> frame; ``fidelity_fem`` /
     ``fidelity_kinematic`` relative displacement error per frame and region (``regions``);
     ``lip_gap_truth`` / ``lip_gap_fem`` / ``lip_gap_kinematic`` (T,) m; ``truth_frames``
-    (F,) and ``error_fem`` / ``error_kinematic`` (F,) m RMS distance to the true surface.
+    (F,) and ``error_fem`` / ``error_kinematic`` (F,) m RMS distance to the true surface;
+    ``surfaces_fem`` / ``surfaces_kinematic`` the scan moved by each against the truth
+    (silhouettes per frame and view of ``silhouette_views_deg``, triangle stretch).
     """
 
     fem: LandmarkMeasures
@@ -117,12 +135,16 @@ class FaceEvaluation:
     truth_frames: NDArray | None = None
     error_fem: NDArray | None = None
     error_kinematic: NDArray | None = None
+    silhouette_views_deg: list[float] | None = None
+    surfaces_fem: SurfaceQuality | None = None
+    surfaces_kinematic: SurfaceQuality | None = None
 
 
 def evaluate_face(
-    run: FaceRun, truth: Truth | None, params: EvaluateParams
+    run: FaceRun, truth: Truth | None, params: EvaluateParams, cache: FileCache | None = None
 ) -> tuple[FaceEvaluation, dict[str, Any]]:
-    """The measures of one run and its summary (rounded figures: mm, s, ratios)."""
+    """The measures of one run and its summary (rounded figures: mm, s, ratios); ``cache``
+    keeps the scan's embedding in the tets (``physanim.mesh.embed``)."""
     from physanim.evaluate.measures import driven_free_lag, landmark_measures
     from physanim.names import name_index
 
@@ -152,7 +174,7 @@ def evaluate_face(
     }
     fields: dict[str, Any] = {}
     if truth is not None:
-        found, figures = _against_truth(run, truth, params)
+        found, figures = _against_truth(run, truth, params, cache)
         fields.update(found)
         summary.update(figures)
     evaluation = FaceEvaluation(
@@ -183,10 +205,11 @@ def philtrum_curves(run: FaceRun) -> dict[str, NDArray]:
 
 
 def _against_truth(
-    run: FaceRun, truth: Truth, params: EvaluateParams
+    run: FaceRun, truth: Truth, params: EvaluateParams, cache: FileCache | None
 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Motion fidelity per frame and region, the lip gap, and the surface distance of the FEM
-    skin and the kinematic scan against the truth: (output fields, summary entries)."""
+    """Motion fidelity per frame and region, the lip gap, the surface distance and the
+    surface quality of the FEM skin and the kinematic scan against the truth: (output
+    fields, summary entries)."""
     from physanim.evaluate.fidelity import (
         REGIONS,
         face_regions,
@@ -205,8 +228,9 @@ def _against_truth(
     rng = np.random.default_rng(0)
     scan_idx = np.sort(rng.choice(len(scan_v), min(len(scan_v), params.error_max_points), False))
     lips = list(lip_midline_points(mouth, scan_v, scan_side, params.lip_offset_m))
-    # the FEM moves the lip points as it moves the rendered scan
-    fem_lips = embedded_displacements(scan_v[lips], scan_side[lips], nodes, tets, mouth, disp)
+    # the FEM moves the scan (and its lip points) as it moves the rendered one
+    fem_scan = scan_v + embedded_displacements(scan_v, scan_side, nodes, tets, mouth, disp, cache)
+    fem_lips = fem_scan[:, lips] - scan_v[lips]
     search = params.closest_points
     true_lips = follow_truth(scan_v[lips], truth.vertices, truth.faces, search).displacement
     true_gap = lip_gap(*(scan_v[lips][None] + true_lips).transpose(1, 0, 2))
@@ -257,7 +281,62 @@ def _against_truth(
         "fem": round(float(np.sqrt(np.mean(err_fem**2))) * 1e3, 3),
         "kinematic": round(float(np.sqrt(np.mean(err_kin**2))) * 1e3, 3),
     }
+    surfaces, figures = _surfaces(run, truth, params, fem_scan)
+    fields.update(surfaces)
+    out["surfaces"] = figures
     return fields, out
+
+
+def _surfaces(
+    run: FaceRun, truth: Truth, params: EvaluateParams, fem_scan: NDArray
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The scan moved by the FEM (``fem_scan`` (T, N, 3) m) and by the capture against the
+    same scan moved by the truth: silhouettes per frame and view, triangle stretch outside the
+    lip seam; the truth's own largest stretch at the peaks: (output fields, summary entries)."""
+    from physanim.evaluate.fidelity import follow_truth
+    from physanim.evaluate.surfaces import (
+        RestTriangles,
+        seam_faces,
+        silhouettes,
+        surface_quality,
+        view_cameras,
+    )
+
+    scan_v, faces = run.scan_vertices, run.scan_faces
+    size, views = params.silhouette_size_px, params.silhouette_views_deg
+    cameras = view_cameras(scan_v, size, views)
+    true_scan = scan_v + follow_truth(scan_v, truth.vertices, truth.faces,
+                                      params.closest_points).displacement  # fmt: skip
+    truth_masks = silhouettes(true_scan, faces, cameras, size)
+    away = ~seam_faces(faces, run.scan_parent)
+    kinematic = np.asarray(run.kinematic, dtype=np.float64)
+    found = {
+        label: surface_quality(moved, truth_masks, faces, away, cameras, size)
+        for label, moved in (("fem", fem_scan), ("kinematic", kinematic))
+    }
+    own = RestTriangles.of(truth.vertices[0], truth.faces)  # at the peaks: 1 s per 30 frames
+    stretch_truth = max(
+        own.stretch(truth.vertices[f])[0].max() for f in truth.peak_frames().values()
+    )
+    figures: dict[str, Any] = {
+        label: {
+            "silhouette_iou_min": {
+                f"{v:g}": _r(q.silhouette_iou[:, i].min()) for i, v in enumerate(views)
+            },  # fmt: skip
+            "silhouette_worst_frame": int(np.argmin(q.silhouette_iou.min(axis=1))),
+            "max_stretch": _r(q.max_stretch.max()),
+            "max_stretch_frame": int(np.argmax(q.max_stretch)),
+            "inverted_max": int(q.inverted.max()),
+        }
+        for label, q in found.items()
+    }
+    figures["truth"] = {"max_stretch_at_peaks": _r(stretch_truth)}
+    fields = {
+        "silhouette_views_deg": list(views),
+        "surfaces_fem": found["fem"],
+        "surfaces_kinematic": found["kinematic"],
+    }
+    return fields, figures
 
 
 def _rows(frames: Any, idx: NDArray) -> NDArray:
