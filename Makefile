@@ -16,10 +16,13 @@ CONFIG_ARGS := $(foreach c,$(CONFIG),-c $(c))
 # rendering through EGL (libegl1, libgl1); SuiteSparse headers so scikit-sparse (CHOLMOD, the
 # FEM's fastest solver) can build; without them the FEM falls back to SuperLU. OpenBLAS becomes
 # the system BLAS (libblas.so.3 alternative) under CHOLMOD: its supernodal factorisation of the
-# demo's Newmark matrix takes 0.4 s instead of 3.2 s with Debian's reference BLAS.
-DEB_PACKAGES := libusb-1.0-0 libgomp1 libgl1 libegl1 libglib2.0-0 libsuitesparse-dev libopenblas0-pthread
+# demo's Newmark matrix takes 0.4 s instead of 3.2 s with Debian's reference BLAS. three.js
+# (libjs-three) for the report's 3D viewer.
+DEB_PACKAGES := libusb-1.0-0 libgomp1 libgl1 libegl1 libglib2.0-0 libsuitesparse-dev libopenblas0-pthread libjs-three
+# Only the tests need a browser: the viewer's headless-Chromium test (.ci/run installs it).
+TEST_DEB_PACKAGES := chromium
 
-.PHONY: help setup setup-system system-check pipeline stage status arm sweep dag demo test bench docs lint format clean-store
+.PHONY: help setup setup-system setup-test-system system-check pipeline stage status arm sweep dag demo test bench docs lint format clean-store
 
 help:
 	@echo "make pipeline [DATASET=demo] [CONFIG=configs/x.yaml] - run the face pipeline"
@@ -50,10 +53,17 @@ setup-system:
 	$$SUDO apt-get update -qq && \
 	DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $(DEB_PACKAGES) >/dev/null
 
-# Runs setup-system only when a needed shared library is missing.
+# The tests' Debian packages besides those (needs root or sudo); .ci/run calls it.
+setup-test-system:
+	@if [ "$$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi; \
+	$$SUDO apt-get update -qq && \
+	DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $(TEST_DEB_PACKAGES) >/dev/null
+
+# Runs setup-system only when a needed shared library (or three.js) is missing.
 system-check:
 	@missing=0; for lib in libusb-1.0.so.0 libgomp.so.1 libEGL.so.1 libGL.so.1 libcholmod.so libopenblas.so.0; do \
 	  ldconfig -p | grep -q "$$lib" || missing=1; done; \
+	test -f /usr/share/javascript/three/three.min.js || missing=1; \
 	if [ $$missing = 1 ]; then echo "installing Debian packages: $(DEB_PACKAGES)"; \
 	  $(MAKE) --no-print-directory setup-system || echo "warning: could not install $(DEB_PACKAGES); run make setup-system as root"; fi
 

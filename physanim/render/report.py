@@ -164,6 +164,7 @@ def build_report(
     tables: Mapping[str, tuple[Sequence[str], Sequence[Sequence[Any]]]] | None = None,
     warnings: Sequence[str] = (),
     subtitle: str = "",
+    viewer: str | Path | None = None,
 ) -> Path:
     """Write ``out_dir/index.html`` and return its path.
 
@@ -175,6 +176,8 @@ def build_report(
     collapsible block.  ``variants``: variant -> measure -> value, shown as one column per
     variant.  ``galleries``: variant -> (caption, file) videos (.mp4/.webm) and images, one
     card per variant side by side. ``warnings``: lines shown first, in a red box.
+    ``viewer``: a page (``physanim.render.viewer``) embedded after the video, or a line of
+    text saying why there is none.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -198,6 +201,17 @@ def build_report(
             f"{_video(src)}"
             f"<p><a href='{src}'>{src}</a></p></section>"
         )
+    if isinstance(viewer, Path):
+        src = _e(_rel(viewer, out_dir, "viewer"))
+        parts.append(
+            "<h2>3D viewer</h2><section class='card'>"
+            f"<iframe src='{src}' title='3D viewer' style='width:100%;height:520px;border:0'>"
+            f"</iframe><p><a href='{src}'>open it alone</a>: drag to orbit, wheel to zoom, "
+            "the slider to scrub, the menu to switch between the FEM and the capture</p>"
+            "</section>"
+        )
+    elif viewer:
+        parts.append(f"<h2>3D viewer</h2><section class='card'><p>{_e(viewer)}</p></section>")
     if key_figures:
         table = _table(("figure", "value"), list(key_figures.items()))
         parts.append(f"<h2>Key figures</h2><section class='card'>{table}</section>")

@@ -167,6 +167,7 @@ def write_run_report(
         )
     return build_report(
         out_dir,
+        viewer=_viewer(store, shown, keys, out_dir),
         tables=capture_tables(evaluated, simulated),
         title=title,
         video=video,
@@ -177,6 +178,26 @@ def write_run_report(
         warnings=warnings,
         subtitle=f"store {store.root}",
     )
+
+
+#: The exported glTF files the viewer plays, by file stem, and their labels in it.
+VIEWER_MODELS = {"fem": "FEM", "capture": "captured scan"}
+
+
+def _viewer(
+    store: StageStore, shown: Sequence[StageSpec[Any]], keys: dict[str, str], out_dir: Path
+) -> Path | str | None:
+    """The report's 3D viewer of the glTF files a shown stage wrote (the export stage's), or
+    why there is none (three.js missing), or None where no stage wrote one."""
+    from physanim.render.viewer import THREE_MISSING, three_available, write_viewer
+
+    for s in shown:
+        folder = store.files(s.name, keys[s.name])
+        found = {label: folder / f"{stem}.glb" for stem, label in VIEWER_MODELS.items()}
+        found = {label: path for label, path in found.items() if path.is_file()}
+        if found:
+            return write_viewer(out_dir, found) if three_available() else THREE_MISSING
+    return None
 
 
 #: Variants the run report compares: the most recent runs' (a store holds every edit ever run).
@@ -221,8 +242,9 @@ def _compare_variants(
 def capture_tables(evaluated: dict[str, Any], simulated: dict[str, Any]) -> dict[str, Any]:
     """The report's "does the simulated face perform the capture?" table from the evaluate
     and simulate summaries: relative displacement error of the FEM and the kinematic scan at
-    each peak frame (whole face and per region), the lip gap against the truth, stress hot
-    spots and how much of the skin the drive holds.  Empty without ground truth."""
+    each peak frame (whole face and per region), the lip gap against the truth, the moved
+    scan's silhouettes and triangle stretch, stress hot spots and how much of the skin the
+    drive holds.  Empty without ground truth."""
     fidelity = evaluated.get("fidelity")
     if not fidelity:
         return {}
@@ -244,6 +266,21 @@ def capture_tables(evaluated: dict[str, Any], simulated: dict[str, Any]) -> dict
         rows.append([f"lip gap at the {peak} peak (mm; truth {truth})",
                      gaps.get("fem", {}).get(peak), gaps.get("kinematic", {}).get(peak),
                      f"within 15 % of {truth}" if peak == "jaw_open" else ""])  # fmt: skip
+    surfaces = evaluated.get("surfaces", {})
+    for view in surfaces.get("fem", {}).get("silhouette_iou_min", {}):
+        name = "front" if float(view) == 0 else f"turned {view} deg"
+        rows.append([f"silhouette against the truth's, worst frame ({name}; 1 = same outline)",
+                     surfaces["fem"]["silhouette_iou_min"][view],
+                     surfaces["kinematic"]["silhouette_iou_min"][view], ">= 0.98"])  # fmt: skip
+    if surfaces:
+        truth = surfaces.get("truth", {}).get("max_stretch_at_peaks")
+        rows.append([f"largest stretch of a scan triangle off the lip seam (the truth's own at "
+                     f"the peaks: {truth})",
+                     surfaces["fem"]["max_stretch"], surfaces["kinematic"]["max_stretch"],
+                     ""])  # fmt: skip
+        rows.append(["scan triangles turned over (off the lip seam, worst frame)",
+                     surfaces["fem"]["inverted_max"], surfaces["kinematic"]["inverted_max"],
+                     "0"])  # fmt: skip
     rows.append(["peak / 99th-percentile von Mises stress (worst frame)",
                  simulated.get("peak_to_p99_von_mises"), "", "<= 5"])  # fmt: skip
     rows.append(["fraction of the skin nodes the drive holds",
