@@ -232,24 +232,27 @@ def _against_truth(
     fem_scan = scan_v + embedded_displacements(scan_v, scan_side, nodes, tets, mouth, disp, cache)
     fem_lips = fem_scan[:, lips] - scan_v[lips]
     search = params.closest_points
-    true_lips = follow_truth(scan_v[lips], truth.vertices, truth.faces, search).displacement
-    true_gap = lip_gap(*(scan_v[lips][None] + true_lips).transpose(1, 0, 2))
+    # the true motion of every scan vertex: its lip points', its sample's, its silhouettes'
+    scan_truth = follow_truth(scan_v, truth.vertices, truth.faces, search).displacement
+    true_gap = lip_gap(*(scan_v[lips][None] + scan_truth[:, lips]).transpose(1, 0, 2))
     kin = run.kinematic
-    models = {
-        "fem": (nodes[skin], disp[:, skin], scan_v[lips] + fem_lips),
+    models = {  # rest points, their motion, the lip points moved, the true motion (None: find)
+        "fem": (nodes[skin], disp[:, skin], scan_v[lips] + fem_lips, None),
         "kinematic": (
             scan_v[scan_idx],
             _rows(kin, scan_idx) - scan_v[scan_idx],
             _rows(kin, np.asarray(lips)),
+            scan_truth[:, scan_idx],
         ),
     }
     peaks = truth.peak_frames()
     fields: dict[str, Any] = {"peak_frames": peaks, "regions": list(REGIONS)}
     fields["lip_gap_truth"] = true_gap
     out: dict[str, Any] = {"peak_frames": peaks, "lip_gap_mm": {}, "fidelity": {}}
-    for label, (rest, moved, lip_pts) in models.items():
-        tm = follow_truth(rest, truth.vertices, truth.faces, search)
-        fid = motion_fidelity(moved, tm.displacement, face_regions(rest, landmarks),
+    for label, (rest, moved, lip_pts, true) in models.items():
+        if true is None:
+            true = follow_truth(rest, truth.vertices, truth.faces, search).displacement
+        fid = motion_fidelity(moved, true, face_regions(rest, landmarks),
                               params.min_motion_m)  # fmt: skip
         fields[f"fidelity_{label}"] = fid
         gap = lip_gap(lip_pts[:, 0], lip_pts[:, 1])
@@ -281,19 +284,19 @@ def _against_truth(
         "fem": round(float(np.sqrt(np.mean(err_fem**2))) * 1e3, 3),
         "kinematic": round(float(np.sqrt(np.mean(err_kin**2))) * 1e3, 3),
     }
-    surfaces, figures = _surfaces(run, truth, params, fem_scan)
+    surfaces, figures = _surfaces(run, truth, params, fem_scan, scan_v + scan_truth)
     fields.update(surfaces)
     out["surfaces"] = figures
     return fields, out
 
 
 def _surfaces(
-    run: FaceRun, truth: Truth, params: EvaluateParams, fem_scan: NDArray
+    run: FaceRun, truth: Truth, params: EvaluateParams, fem_scan: NDArray, true_scan: NDArray
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The scan moved by the FEM (``fem_scan`` (T, N, 3) m) and by the capture against the
-    same scan moved by the truth: silhouettes per frame and view, triangle stretch outside the
-    lip seam; the truth's own largest stretch at the peaks: (output fields, summary entries)."""
-    from physanim.evaluate.fidelity import follow_truth
+    same scan moved by the truth (``true_scan`` (T, N, 3) m): silhouettes per frame and view,
+    triangle stretch outside the lip seam; the truth's own largest stretch at the peaks:
+    (output fields, summary entries)."""
     from physanim.evaluate.surfaces import (
         RestTriangles,
         seam_faces,
@@ -305,8 +308,6 @@ def _surfaces(
     scan_v, faces = run.scan_vertices, run.scan_faces
     size, views = params.silhouette_size_px, params.silhouette_views_deg
     cameras = view_cameras(scan_v, size, views)
-    true_scan = scan_v + follow_truth(scan_v, truth.vertices, truth.faces,
-                                      params.closest_points).displacement  # fmt: skip
     truth_masks = silhouettes(true_scan, faces, cameras, size)
     away = ~seam_faces(faces, run.scan_parent)
     kinematic = np.asarray(run.kinematic, dtype=np.float64)
