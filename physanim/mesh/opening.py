@@ -21,23 +21,12 @@ in rings of faces, not in metres, and neither it nor Open3D has a geodesic openi
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import dijkstra
 
 from physanim.mesh.notches import border_loops
+from physanim.mesh.scan_io import largest_component
 from physanim.mesh.topology import edge_length_graph, triangle_areas
-
-
-def _largest_part(vertices: NDArray, faces: NDArray) -> NDArray:
-    """The faces (K, 3) of the vertex-connected part of ``faces`` with the largest area."""
-    n = len(vertices)
-    rows, cols = faces.ravel(), faces[:, [1, 2, 0]].ravel()
-    adj = sp.coo_array((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    _, label = connected_components(adj, directed=False)
-    part = label[faces[:, 0]]
-    area = np.bincount(part, weights=triangle_areas(vertices, faces))
-    return faces[part == np.argmax(area)]
 
 
 def drop_thin_parts(vertices: NDArray, faces: NDArray, min_width_m: float) -> NDArray:
@@ -59,6 +48,6 @@ def drop_thin_parts(vertices: NDArray, faces: NDArray, min_width_m: float) -> ND
             f"scan.min_width_m {min_width_m}: no part of the scan is that wide (its units? a "
             "face is about 0.15 m across)"
         )
-    kept = np.unique(_largest_part(vertices, core))
+    kept = np.unique(largest_component(core, len(vertices), triangle_areas(vertices, core)))
     from_core = dijkstra(graph, indices=kept, min_only=True, limit=1.5 * radius)
     return faces[(from_core[faces] <= radius * (1.0 + 1e-9)).all(axis=1)]

@@ -88,14 +88,17 @@ def load_scan(path: Path | str, units: Units) -> tuple[np.ndarray, np.ndarray]:
     return vertices, faces
 
 
-def largest_component(faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Faces ``(M', 3)`` of the largest vertex-connected component (by face count)."""
+def largest_component(
+    faces: np.ndarray, n_vertices: int, weights: np.ndarray | None = None
+) -> np.ndarray:
+    """Faces ``(M', 3)`` of the largest vertex-connected component: by face count, or by the
+    sum of the faces' ``weights`` (M,) (their areas, say)."""
     rows = faces[:, [0, 1, 2]].ravel()
     cols = faces[:, [1, 2, 0]].ravel()
     adj = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_vertices))
     _, labels = connected_components(adj, directed=False)
     face_label = labels[faces[:, 0]]
-    counts = np.bincount(face_label)
+    counts = np.bincount(face_label, weights=weights)
     return faces[face_label == np.argmax(counts)]
 
 
