@@ -21,8 +21,11 @@ CONFIG_ARGS := $(foreach c,$(CONFIG),-c $(c))
 DEB_PACKAGES := libusb-1.0-0 libgomp1 libgl1 libegl1 libglib2.0-0 libsuitesparse-dev libopenblas0-pthread libjs-three
 # Only the tests need a browser: the viewer's headless-Chromium test (.ci/run installs it).
 TEST_DEB_PACKAGES := chromium
+# Blender's Python module (~370 MB) for the Alembic files and the Blender read-back tests. It
+# pins numpy 1.26, which this project's OpenCV and Zarr forbid, so it gets its own interpreter.
+BLENDER_VENV := .venv-blender
 
-.PHONY: help setup setup-system setup-test-system system-check pipeline stage status arm sweep dag demo test bench docs lint format clean-store
+.PHONY: help setup setup-blender setup-system setup-test-system system-check pipeline stage status arm sweep dag demo test bench docs lint format clean-store
 
 help:
 	@echo "make pipeline [DATASET=demo] [CONFIG=configs/x.yaml] - run the face pipeline"
@@ -31,6 +34,7 @@ help:
 	@echo "make sweep SWEEP=configs/sweeps/x.yaml             - parameter sweep on Dask"
 	@echo "make bench                                         - run the benchmarks, record JSON, regenerate docs"
 	@echo "make docs                                          - regenerate docs/PERFORMANCE.md and docs/STAGES.md"
+	@echo "make setup-blender                                 - Blender (bpy) for Alembic export"
 	@echo "make status | dag | test | lint | setup-system"
 
 $(VENV)/.installed: pyproject.toml
@@ -46,6 +50,15 @@ $(VENV)/.installed: pyproject.toml
 	@touch $@
 
 setup: system-check $(VENV)/.installed
+
+# Optional: the export stage writes Alembic (export.alembic=true) and the tests read the
+# exported files back in Blender only where this exists; without it they say so and skip.
+$(BLENDER_VENV)/.installed:
+	@test -x $(BLENDER_VENV)/bin/python || $(PYTHON) -m venv $(BLENDER_VENV)
+	@$(BLENDER_VENV)/bin/python -m pip install --quiet 'bpy>=4.2' && touch $@ || \
+	  echo "warning: pip could not install bpy for $$($(PYTHON) --version): no Alembic export, Blender tests skip"
+
+setup-blender: $(BLENDER_VENV)/.installed
 
 # Installs the Debian packages (needs root or sudo); .ci/run calls it.
 setup-system:
@@ -87,7 +100,7 @@ sweep: setup
 dag: setup
 	$(PHYSANIM) dag -p $(PIPELINE) $(ARGS)
 
-test: setup
+test: setup setup-blender
 	$(PY) -m pytest -q $(ARGS)
 
 # Each benchmark appends its run to benchmarks/results/<name>.json; the page is made from those.

@@ -65,7 +65,11 @@ def compute(
     from physanim.mesh.embed import embedded_displacements
     from physanim.store.file_cache import FileCache
 
-    require("pxr", "pygltflib", *(["bpy"] if params.alembic else []))  # before any writing
+    require("pxr", "pygltflib")  # before any writing
+    if params.alembic:
+        from physanim.export.blender import require_blender
+
+        require_blender()
     scan = align.scan_vertices
     fem_skin = scan + embedded_displacements(
         scan, align.scan_side, tetra.nodes, tetra.tets, align.mouth(), simulate.displacements,

@@ -5,7 +5,7 @@ Alembic.
 frame rate, with its per-frame normals; ``usd``: a USD stage with point time samples;
 ``gltf``: a morph-target basis of the animation (its principal components) with animated
 weights, written and decoded as .glb; ``alembic``: Alembic through Blender's Python module
-``bpy`` in a child process (optional: ``pip install '.[blender]'``).
+``bpy`` in a child process of its own interpreter (optional, ``blender``: ``make setup-blender``).
 
 Every file is in metres, +y up, right-handed (the actor frame: +x the actor's left, +z out of
 the face), frame i at i / fps seconds.
@@ -16,7 +16,7 @@ from __future__ import annotations
 import importlib.util
 
 #: The optional Python modules of the exporters -> the extra of pyproject.toml installing them.
-EXTRAS = {"pxr": "export", "pygltflib": "export", "bpy": "blender"}
+EXTRAS = {"pxr": "export", "pygltflib": "export"}
 
 
 def missing(*modules: str) -> list[str]:

@@ -15,7 +15,7 @@ from physanim.export.params import ExportParams
 from physanim.store.file_cache import FileCache, content_digest
 
 #: The modules whose code makes the files: an edit of any of them makes them anew.
-_WRITERS = ("files.py", "animation.py", "usd.py", "gltf.py", "alembic.py")
+_WRITERS = ("files.py", "animation.py", "usd.py", "gltf.py", "alembic.py", "blender_scene.py")
 
 
 @dataclass(frozen=True)

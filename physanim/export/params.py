@@ -29,5 +29,5 @@ class ExportParams(BaseModel):
     alembic: bool = Field(
         False,
         description="also write Alembic (.abc) files, through Blender's Python module "
-        "(pip install '.[blender]'; about 8 s per variant on the demo)",
+        "(make setup-blender; about 8 s per variant on the demo)",
     )

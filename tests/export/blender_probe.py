@@ -1,6 +1,7 @@
-"""Run by the Blender tests in a child process: open a USD, Alembic or glTF file in Blender
-at a frame rate, step its frames and save the mesh's world-space vertex positions, turned
-from Blender's Z-up back to the files' Y-up, as (T, N, 3) float64 m in a .npy file.
+"""Run by the Blender tests in a child process of Blender's interpreter: open a USD, Alembic
+or glTF file in Blender at a frame rate, step its frames and save the mesh's world-space
+vertex positions, turned from Blender's Z-up back to the files' Y-up, as (T, N, 3) float64 m
+in a .npy file.
 
     python tests/export/blender_probe.py FILE FPS FRAMES OUT.npy
 """
@@ -13,7 +14,9 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from physanim.export.alembic import set_frame_rate
+# Blender's interpreter has no physanim: the one helper comes from its standalone script
+sys.path.insert(0, str(Path(__file__).parents[2] / "physanim" / "export"))
+from blender_scene import set_frame_rate  # noqa: E402
 
 IMPORTERS = {
     ".usdc": bpy.ops.wm.usd_import,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -54,9 +55,23 @@ def test_a_missing_writer_names_the_extra_to_install() -> None:
     code = (
         "import sys; sys.path = [p for p in sys.path if 'site-packages' not in p]; "
         f"sys.path.insert(0, {str(ROOT)!r}); from physanim.export import require; "
-        "require('pxr', 'pygltflib', 'bpy')"
+        "require('pxr', 'pygltflib')"
     )
     done = subprocess.run([sys.executable, "-I", "-c", code], capture_output=True, text=True)
     assert done.returncode == 1
-    assert "export needs pxr, pygltflib, bpy: pip install '.[blender,export]'" in done.stderr
+    assert "export needs pxr, pygltflib: pip install '.[export]'" in done.stderr
     require("pxr", "pygltflib")  # here they are
+
+
+def test_a_missing_blender_says_how_to_get_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An Alembic export with PHYSANIM_BLENDER_PYTHON naming no file fails before Blender
+    runs, naming the variable and the make target."""
+    from physanim.export.alembic import write_alembic
+    from physanim.export.blender import ENV
+
+    monkeypatch.setenv(ENV, str(tmp_path / "no-python"))
+    with pytest.raises(RuntimeError, match=f"{ENV}=.*no-python is not a file.*make setup-blender"):
+        write_alembic(tmp_path / "x.usdc", tmp_path / "x.abc", 30.0, 4)
+    assert not (tmp_path / "x.abc").exists()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from pxr import Usd, UsdGeom
@@ -25,8 +26,10 @@ from tests.commands import ROOT, physanim
 from tests.conftest import COARSE
 
 
-def test_the_files_hold_the_runs_motion(face_demo: tuple[Path, str]) -> None:
-    data, _ = face_demo
+def stored_motion(data: Path) -> tuple[Any, dict[str, np.ndarray], ExportOutput]:
+    """The coarse demo run in ``data``: its config, each exported variant's motion (T, N, 3) m
+    from the stored upstream outputs (without the stage's embedding cache), and the export
+    stage's output."""
     cfg, _ = load_config(
         FACE.config_model(), [FACE.default_config, ROOT / COARSE], [f"dataset.dir={ROOT / data}"]
     )
@@ -34,16 +37,21 @@ def test_the_files_hold_the_runs_motion(face_demo: tuple[Path, str]) -> None:
     align = read_dataclass(AlignOutput, store.open("align"))
     tetra = read_dataclass(TetraOutput, store.open("tetra"))
     simulate = read_dataclass(SimulateOutput, store.open("simulate"))
-    fps = read_dataclass(TrackOutput, store.open("track")).fps
     scan = align.scan_vertices
-    expected = {  # from the stored upstream outputs, without the stage's embedding cache
+    expected = {
         "fem": scan
         + embedded_displacements(
             scan, align.scan_side, tetra.nodes, tetra.tets, align.mouth(), simulate.displacements
         ),
         "capture": read_dataclass(DenseOutput, store.open("dense")).motion[...],
     }
-    out = read_dataclass(ExportOutput, store.open("export"))
+    return cfg, expected, read_dataclass(ExportOutput, store.open("export"))
+
+
+def test_the_files_hold_the_runs_motion(face_demo: tuple[Path, str]) -> None:
+    data, _ = face_demo
+    cfg, expected, out = stored_motion(data)
+    fps = read_dataclass(TrackOutput, StageStore(cfg.dataset.store_path).open("track")).fps
     assert out.variants == ["fem", "capture"] and out.fps == fps
     show = physanim("show", "export", "--dataset", str(data), "-c", COARSE)
     assert show.returncode == 0, show.stderr
