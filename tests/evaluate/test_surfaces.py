@@ -75,6 +75,24 @@ def test_silhouette_overlap_of_a_shifted_plate() -> None:
     assert iou(masks[0], masks[1])[0] == pytest.approx(36.0 / 44.0, abs=0.01)
 
 
+def test_silhouettes_compare_outlines_so_an_opened_mouth_is_no_loss() -> None:
+    """A plate with a 10 x 4 mm slot (a mouth the lip seam let open) against the same plate
+    shut: the outlines agree exactly; the slot moved to the border (a gap in the outline)
+    is a loss of its area, 40 of 1600 mm^2."""
+    size = (200, 240)
+    whole, faces = grid_mesh(lambda x, y: np.ones_like(x, bool), (40.0, 40.0), 1.0)
+
+    def slot(x0: float):
+        return lambda x, y: ~((np.abs(x - x0) < 5.0) & (np.abs(y - 20.0) < 2.0))
+
+    cameras = view_cameras(whole, size, (0.0,))
+    masks = silhouettes(whole[None], faces, cameras, size)
+    for x0, expected in ((20.0, 1.0), (5.0, 1560.0 / 1600.0)):
+        holed, holed_faces = grid_mesh(slot(x0), (40.0, 40.0), 1.0)
+        opened = silhouettes(holed[None], holed_faces, cameras, size)
+        assert iou(opened[0], masks[0])[0] == pytest.approx(expected, abs=0.003)
+
+
 def test_surface_quality_sees_a_flap_the_truth_does_not_have() -> None:
     """A plate whose corner region folds forward (a flap) in the model but not in the truth:
     the side view's overlap falls, a triangle across the fold stretches, and the folded ones
