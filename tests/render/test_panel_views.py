@@ -162,3 +162,15 @@ def test_tiles_key_reads_the_truth_only_for_the_error_colouring(tmp_path: Path):
     ctx = SimpleNamespace(dataset_dir=tmp_path / "elsewhere", progress=lambda name: None)
     with pytest.raises(ValueError, match="no truth .*elsewhere/ground_truth.zarr"):
         tiles_stage.compute(TileParams(scan_colour="error"), None, None, None, None, ctx)
+
+
+def test_error_colour_bar_spans_the_moving_skins_error() -> None:
+    """20 frames of 1000 vertices at rest with no error but for one frame where a tenth of
+    them (a chin at the jaw drop) err 5 mm, and one wild edge vertex at 100 mm: the bar's top
+    is 5 mm (all errors' 99th percentile would read 0: the chin all in the top colour); a set
+    ``error_max_mm`` wins."""
+    error = np.zeros((20, 1000))
+    error[7, :100] = 5.0
+    error[3, 999] = 100.0
+    assert TileParams().error_colours(error).clim == (0.0, 5.0)
+    assert TileParams(error_max_mm=2.0).error_colours(error).clim == (0.0, 2.0)
