@@ -158,7 +158,8 @@ def evaluate_face(
     ch = name_index(names, ["ch_L", "ch_R"])
     summary: dict[str, Any] = {
         label: {
-            "mean_symmetry_cost": round(float(np.mean(m.cost[1:])), 4),
+            # over the frames whose landmarks were all tracked (NaN: none were)
+            "mean_symmetry_cost": round(_finite_mean(m.cost[1:]), 4),
             "peak_mouth_corner_mm": [round(float(m.peak[i]) * 1e3, 3) for i in ch],
             "peak_mouth_corner_frame": [int(m.peak_frame[i]) for i in ch],
         }
@@ -345,6 +346,12 @@ def _rows(frames: Any, idx: NDArray) -> NDArray:
     if isinstance(frames, np.ndarray):
         return frames[:, idx]
     return np.asarray(frames.get_orthogonal_selection((slice(None), idx, slice(None))))
+
+
+def _finite_mean(x: NDArray) -> float:
+    """The mean of the finite entries of ``x``, NaN when there are none."""
+    finite = x[np.isfinite(x)]
+    return float(finite.mean()) if finite.size else math.nan
 
 
 def _r(x: float) -> float | None:

@@ -29,10 +29,15 @@ class LandmarkMeasures:
 
 
 def landmark_measures(points: NDArray, names: Sequence[str]) -> LandmarkMeasures:
-    """Symmetry cost and displacement curves of named landmark trajectories (T, K, 3) m."""
+    """Symmetry cost and displacement curves of named landmark trajectories (T, K, 3) m.
+    A landmark the tracker lost in some frames (NaN there: a marker the lips hid) peaks over
+    the frames it was tracked in; one never tracked peaks at NaN, frame 0."""
     cost, e_l, e_r = symmetry_cost(points, names)
     disp = displacement_curves(points)
-    return LandmarkMeasures(cost, e_l, e_r, disp, disp.max(axis=0), disp.argmax(axis=0))
+    tracked = np.isfinite(disp)
+    frame = np.where(tracked, disp, -np.inf).argmax(axis=0)
+    peak = np.where(tracked.any(axis=0), np.take_along_axis(disp, frame[None], 0)[0], np.nan)
+    return LandmarkMeasures(cost, e_l, e_r, disp, peak, frame)
 
 
 def driven_free_lag(displacements: NDArray, driven: NDArray, free: NDArray, max_lag: int) -> int:

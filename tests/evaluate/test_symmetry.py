@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from physanim.evaluate.measures import landmark_measures
 from physanim.evaluate.symmetry import displacement_curves, lag_frames, symmetry_cost
 
 NAMES = ["ch_L", "ex_L", "pi_L", "al_L", "cphi_L", "ch_R", "ex_R", "pi_R", "al_R", "cphi_R"]
@@ -44,3 +45,16 @@ def test_displacement_and_lag() -> None:
     assert lag_frames(pts[:, 0, 1], pts[:, 1, 1], 10) == 4
     pulse = lambda centre: np.exp(-(((np.arange(30) - centre) / 3.0) ** 2))  # noqa: E731
     assert lag_frames(pulse(12), pulse(16), 50) == 4  # search range clamped to T - 1
+
+
+def test_a_landmark_lost_in_some_frames_peaks_where_it_was_tracked() -> None:
+    """Landmark 'a' moves 1 and 3 mm in frames 1 and 2 and is lost (NaN) in frame 3: it peaks
+    at 3 mm in frame 2; landmark 'b', never tracked, peaks at NaN."""
+    pts = np.zeros((4, 2, 3))
+    pts[1:3, 0, 0] = [0.001, 0.003]
+    pts[3, 0] = np.nan
+    pts[:, 1] = np.nan
+    both = np.concatenate([pts, np.stack([face(1, 1)] * 4)], axis=1)
+    m = landmark_measures(both, ["a", "b", *NAMES])
+    assert m.peak[0] == pytest.approx(0.003) and m.peak_frame[0] == 2
+    assert np.isnan(m.peak[1])
