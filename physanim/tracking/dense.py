@@ -22,11 +22,14 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    weighted Kabsch (``physanim.tracking.tracks.head_poses``): points that ride rigidly with
    the head over the sequence dominate, so an expression does not tilt the head.
 5. **Fill and smooth.** Per frame, the displacement field u minimises
-   ``sum_i c_i |u_i - u_obs_i|^2 + lam * sum_edges |u_i - u_j|^2`` over the (lip-cut) scan
-   graph, c_i = 1 where observed: observed motion is smoothed over ``smoothing_m`` and every
-   unobserved vertex is filled harmonically from its neighbours (the seam keeps the lips
-   apart). Observations farther than ``outlier_m`` from the smoothed field are dropped and
-   the field solved again. Then a Gaussian over time (``temporal_sigma_frames``).
+   ``sum_i c_i |u_i - u_obs_i|^2 + lam * sum_edges |(u_i - u_j) - w_ij (p_i - p_j)|^2`` over
+   the (lip-cut) scan graph, c_i = 1 where observed, p the prior (the kinematic scan's
+   motion, or 0) and w_ij = 1 on the edges that touch a vertex the neutral frame does not
+   see, else 0: observed motion is smoothed over ``smoothing_m`` and every unobserved vertex
+   is filled harmonically from its neighbours, an unseen one following the prior's shape
+   (the seam keeps the lips apart). Observations farther than ``outlier_m`` from the
+   smoothed field are dropped and the field solved again. Then a Gaussian over time
+   (``temporal_sigma_frames``).
 
 The confidence (T, N) is 1 where a vertex was observed and kept, 0 where it was filled: a
 filled vertex is marked, never silently guessed.
@@ -203,16 +206,27 @@ def _frame_points(
     return points, fb
 
 
-def _smoother(faces: NDArray, seen: NDArray, lam: float) -> Callable[[NDArray], NDArray]:
+def _smoother(laplacian: sp.csr_array, seen: NDArray, lam: float) -> Callable[[NDArray], NDArray]:
     """``solve(b)`` for (S_seen + lam L) u = b on the scan graph, factorised once (CHOLMOD
     when installed, its block solve over the frames' columns; else SuperLU); S_seen the 0/1
-    diagonal of the seen vertices, L the graph Laplacian. b (N, k)."""
+    diagonal of the seen vertices, L the graph ``laplacian`` (N, N). b (N, k)."""
     from physanim.fem.linsolve import factorize_many as factorize
 
     n = len(seen)
-    A = uniform_laplacian(faces, n) * lam + sp.diags_array(seen.astype(np.float64))
+    A = laplacian * lam + sp.diags_array(seen.astype(np.float64))
     # a tiny diagonal keeps pieces without any seen vertex (islands of the scan) regular
     return factorize(sp.csc_matrix(A + sp.identity(n) * 1e-9 * lam))
+
+
+def _laplacian_of_edges_touching(laplacian: sp.csr_array, touching: NDArray) -> sp.csr_array:
+    """The graph Laplacian (N, N) of the edges of ``laplacian``'s graph with at least one end
+    among the ``touching`` (N,) vertices."""
+    adjacency = -sp.triu(laplacian, k=1).tocoo()
+    keep = touching[adjacency.row] | touching[adjacency.col]
+    i, j = adjacency.row[keep], adjacency.col[keep]
+    n = laplacian.shape[0]
+    a = sp.csr_array((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(n, n))
+    return (sp.diags_array(np.asarray(a.sum(axis=1)).ravel()) - a).tocsr()
 
 
 def _induced_laplacian(faces: NDArray, keep: NDArray) -> sp.csr_array:
@@ -351,12 +365,18 @@ def fill_motion(
 ) -> tuple[NDArray, NDArray]:
     """Displacement (T, N, 3) float32 m and confidence (T, N) float32 of every scan vertex
     from the observations (step 5 of the module docstring). With a ``prior`` (T, N, 3) m
-    (the kinematic scan's motion), the observed departure from it is filled instead of the
-    motion itself, so an unobserved vertex keeps the prior's motion plus its neighbours'
-    correction."""
+    (the kinematic scan's motion), the observed departure from it fills the vertices no frame
+    sees, so an unseen vertex keeps the prior's motion plus its neighbours' correction: the
+    smoothness term is on the departure along the edges that touch an unseen vertex and on the
+    motion itself between seen ones. Smoothing the departure everywhere kept the prior's own
+    defects where the frames show better: the kinematic scan folds the eyelid crease at a brow
+    raise (106 triangles turned over on brows-s1), and the observations there, 0.14 mm from
+    the truth, could not unfold it through a smoothed departure (86 stayed turned)."""
     T, n = obs.displacement.shape[0], len(vertices)
     lam = max((params.smoothing_m / _edge_length(vertices, faces)) ** 2, 1e-3)
-    solve = _smoother(faces, obs.seen, lam)
+    laplacian = uniform_laplacian(faces, n)
+    solve = _smoother(laplacian, obs.seen, lam)
+    towards_unseen = _laplacian_of_edges_touching(laplacian, ~obs.seen)
     seen_idx = np.flatnonzero(obs.seen)
     seen_graph = _induced_laplacian(faces, obs.seen)
     observed = np.isfinite(obs.displacement).all(axis=2).T  # (S, T)
@@ -364,15 +384,17 @@ def fill_motion(
     # the departure from the prior at the seen vertices, (S, T, 3)
     measured = np.where(observed[..., None], obs.displacement.transpose(1, 0, 2), 0.0)
     measured -= base[:, seen_idx].transpose(1, 0, 2)
+    prior_columns = base.transpose(1, 0, 2).reshape(n, T * 3)
     keep = observed.copy()
     for _ in range(params.fill_iterations):
         # the seen vertices a frame does not observe (or observes as an outlier) get the
         # harmonic extension of the kept ones, so the smoother's weights stay those of the
         # seen vertices and one factorisation serves every frame
         du = np.stack([_harmonic_fill(seen_graph, keep[:, t], measured[:, t]) for t in range(T)], 1)
-        rhs = np.zeros((n, T * 3))
-        rhs[seen_idx] = du.reshape(len(seen_idx), T * 3)
-        fit = solve(rhs).reshape(n, T, 3)
+        # (S + lam L) u = S (prior + du) + lam L_unseen prior, the motion u over (N, T, 3)
+        rhs = lam * (towards_unseen @ prior_columns) if prior is not None else np.zeros((n, T * 3))
+        rhs[seen_idx] += prior_columns[seen_idx] + du.reshape(len(seen_idx), T * 3)
+        fit = solve(rhs).reshape(n, T, 3) - base.transpose(1, 0, 2)  # the departure
         keep = observed & (np.linalg.norm(fit[seen_idx] - measured, axis=2) < params.outlier_m)
     displacement = base + fit.transpose(1, 0, 2)
     confidence = np.zeros((T, n), dtype=np.float32)
