@@ -8,6 +8,7 @@ from __future__ import annotations
 import hashlib
 import os
 import shutil
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -53,14 +54,13 @@ class FileCache:
         never leaves half a file); the least recently used beyond ``keep`` go."""
         target = self.path(digest, suffix)
         self.folder.mkdir(parents=True, exist_ok=True)
-        tmp = target.with_name(f".{target.stem}.{os.getpid()}{suffix}")
+        # one aside-file per process and thread: stages in threads of one run (evaluate and
+        # export embed the same scan) may put the same digest at once
+        tmp = target.with_name(f".{target.stem}.{os.getpid()}.{threading.get_ident()}{suffix}")
         write(tmp)
         tmp.replace(target)
-        kept = sorted(
-            (p for p in self.folder.iterdir() if p.is_file() and not p.name.startswith(".")),
-            key=lambda p: p.stat().st_mtime,
-        )
-        for old in kept[: -self.keep]:
+        kept = sorted((t, p) for p in self.folder.iterdir() if (t := _mtime(p)) is not None)
+        for _, old in kept[: -self.keep]:
             old.unlink(missing_ok=True)
         return target
 
@@ -74,3 +74,14 @@ class FileCache:
         producer(out)
         self.put(digest, out.suffix, lambda tmp: shutil.copyfile(out, tmp))
         return out
+
+
+def _mtime(path: Path) -> float | None:
+    """The modification time of a cached file (not an aside-file), None for an aside-file or
+    one another thread or process removed meanwhile."""
+    if path.name.startswith("."):
+        return None
+    try:
+        return path.stat().st_mtime if path.is_file() else None
+    except FileNotFoundError:
+        return None
