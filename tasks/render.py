@@ -91,7 +91,7 @@ def compute(
 SPEC = StageSpec.typed(
     "render",
     compute,
-    version="8",
+    version="9",
     doc="panel video (capture | fit | captured scan | FEM | scan and FEM from the side), "
     "symmetry / mouth / energy plots",
     files=FILES,

@@ -313,13 +313,20 @@ def _ftetwild(
     return mesh, quality_report(mesh, params, flipped)
 
 
-def boundary_faces(tets: np.ndarray) -> np.ndarray:
-    """(B, 3) faces of positive tets (m, 4) used by one tet only, oriented outward."""
+def boundary_faces_and_tets(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(B, 3) faces of positive tets (m, 4) used by one tet only, oriented outward, and the
+    tet (B,) each belongs to."""
     faces = tets[:, _OPPOSITE].reshape(-1, 3)
     _, inverse, counts = np.unique(
         np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True
     )
-    return faces[counts[inverse.ravel()] == 1]
+    once = counts[inverse.ravel()] == 1
+    return faces[once], np.repeat(np.arange(len(tets)), 4)[once]
+
+
+def boundary_faces(tets: np.ndarray) -> np.ndarray:
+    """(B, 3) faces of positive tets (m, 4) used by one tet only, oriented outward."""
+    return boundary_faces_and_tets(tets)[0]
 
 
 @dataclass(frozen=True)
