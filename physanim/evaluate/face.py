@@ -115,7 +115,9 @@ class FaceEvaluation:
     ``lip_gap_truth`` / ``lip_gap_fem`` / ``lip_gap_kinematic`` (T,) m; ``truth_frames``
     (F,) and ``error_fem`` / ``error_kinematic`` (F,) m RMS distance to the true surface;
     ``surfaces_fem`` / ``surfaces_kinematic`` the scan moved by each against the truth
-    (silhouettes per frame and view of ``silhouette_views_deg``, triangle stretch).
+    (silhouettes per frame and view of ``silhouette_views_deg``, triangle stretch);
+    ``scan_error_fem`` / ``scan_error_kinematic`` (N,) float32 m, each scan vertex's largest
+    distance over the frames from where the truth moves it (the viewer's error colours).
     """
 
     fem: LandmarkMeasures
@@ -138,6 +140,8 @@ class FaceEvaluation:
     silhouette_views_deg: list[float] | None = None
     surfaces_fem: SurfaceQuality | None = None
     surfaces_kinematic: SurfaceQuality | None = None
+    scan_error_fem: NDArray | None = None
+    scan_error_kinematic: NDArray | None = None
 
 
 def evaluate_face(
@@ -287,6 +291,10 @@ def _against_truth(
     }
     surfaces, figures = _surfaces(run, truth, params, fem_scan, scan_v + scan_truth)
     fields.update(surfaces)
+    fields["scan_error_fem"] = _worst_distance(fem_scan - scan_v, scan_truth)
+    fields["scan_error_kinematic"] = _worst_distance(
+        np.asarray(kin, dtype=np.float64) - scan_v, scan_truth
+    )
     out["surfaces"] = figures
     return fields, out
 
@@ -339,6 +347,12 @@ def _surfaces(
         "surfaces_kinematic": found["kinematic"],
     }
     return fields, figures
+
+
+def _worst_distance(moved: NDArray, true: NDArray) -> NDArray:
+    """(N,) float32 m: the largest distance over the T frames between the displacements
+    ``moved`` and ``true`` (T, N, 3) m of each point."""
+    return np.linalg.norm(moved - true, axis=2).max(axis=0).astype(np.float32)
 
 
 def _rows(frames: Any, idx: NDArray) -> NDArray:

@@ -182,6 +182,8 @@ def write_run_report(
 
 #: The exported glTF files the viewer plays, by file stem, and their labels in it.
 VIEWER_MODELS = {"fem": "FEM", "capture": "captured scan"}
+#: The evaluate output's per-vertex errors of each of them (where the run has a truth).
+VIEWER_ERRORS = {"FEM": "scan_error_fem", "captured scan": "scan_error_kinematic"}
 
 
 def _viewer(
@@ -196,8 +198,29 @@ def _viewer(
         found = {label: folder / f"{stem}.glb" for stem, label in VIEWER_MODELS.items()}
         found = {label: path for label, path in found.items() if path.is_file()}
         if found:
-            return write_viewer(out_dir, found) if three_available() else THREE_MISSING
+            if not three_available():
+                return THREE_MISSING
+            return write_viewer(out_dir, found, colours=_error_colours(store, keys))
     return None
+
+
+def _error_colours(store: StageStore, keys: dict[str, str]) -> dict[str, tuple[Any, str]]:
+    """Viewer label -> ((N, 3) uint8 colours, legend) of each scan vertex's largest error
+    against the truth, from the evaluate output (none without a truth or an evaluate)."""
+    from physanim.render.face_panel import TileParams
+
+    if "evaluate" not in keys or not store.has("evaluate", keys["evaluate"]):
+        return {}
+    group = store.open("evaluate", keys["evaluate"])
+    out = {}
+    for label, name in VIEWER_ERRORS.items():
+        if name in group:
+            error_mm = 1e3 * np.asarray(group[name][...], dtype=np.float64)
+            colour_map = TileParams().error_colours(error_mm[None])
+            top = colour_map.clim[1]
+            legend = f"largest error vs truth: white 0 to purple {top:.2f} mm and above"
+            out[label] = (colour_map.colours(error_mm), legend)
+    return out
 
 
 #: Variants the run report compares: the most recent runs' (a store holds every edit ever run).

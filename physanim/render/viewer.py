@@ -8,9 +8,11 @@ beside the page, so the report needs no network when it is viewed; npm is not av
 to this project. Browsers refuse to fetch files from a ``file://`` page, so each .glb is
 written as a script that assigns its bytes in base64 (an extra third in size).
 
-The page reports its state in the element ``#status`` ("ready: ...") and takes the frame to
-show from the URL (``viewer.html#frame=21``; without it, it plays), so a headless browser can
-check it (``tests/render/test_viewer.py``).
+Where the run has a ground truth, each vertex can be coloured by its error against it (the
+largest over the frames, the captured-scan tiles' colour map): the "error" switch, or
+``#error=1`` in the URL. The page reports its state in the element ``#status`` ("ready:
+...") and takes the frame to show from the URL (``viewer.html#frame=21``; without it, it
+plays), so a headless browser can check it (``tests/render/test_viewer.py``).
 """
 
 from __future__ import annotations
@@ -19,6 +21,9 @@ import base64
 import json
 import shutil
 from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
 
 #: Where Debian's libjs-three puts three.js, and the three scripts the viewer needs.
 THREE_DIR = Path("/usr/share/javascript/three")
@@ -36,10 +41,18 @@ def three_available(root: Path = THREE_DIR) -> bool:
     return all((root / s).is_file() for s in SCRIPTS)
 
 
-def write_viewer(out_dir: Path, models: dict[str, Path], root: Path = THREE_DIR) -> Path:
+def write_viewer(
+    out_dir: Path,
+    models: dict[str, Path],
+    root: Path = THREE_DIR,
+    colours: dict[str, tuple[NDArray, str]] | None = None,
+) -> Path:
     """``out_dir/viewer.html`` playing the glTF binaries ``models`` (label -> .glb path, the
     first shown first; each frame at its key time), with its scripts in ``out_dir/viewer/``
-    (three.js from ``root``). FileNotFoundError names what is missing (three.js, a model)."""
+    (three.js from ``root``). ``colours``: label -> (N, 3) uint8 sRGB per vertex of that
+    model and the legend they mean (the error against the truth), shown with a switch; a
+    model whose vertex count differs is shown plain and the status says so.
+    FileNotFoundError names what is missing (three.js, a model)."""
     if not three_available(root):
         raise FileNotFoundError(THREE_MISSING)
     missing = [str(p) for p in models.values() if not Path(p).is_file()]
@@ -55,6 +68,12 @@ def write_viewer(out_dir: Path, models: dict[str, Path], root: Path = THREE_DIR)
         data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
         text = "window.PHYSANIM_GLB = window.PHYSANIM_GLB || {};\n"
         text += f"window.PHYSANIM_GLB[{json.dumps(label)}] = {json.dumps(data)};\n"
+        if colours and label in colours:
+            rgb, legend = colours[label]
+            packed = base64.b64encode(np.ascontiguousarray(rgb, np.uint8).tobytes()).decode()
+            text += "window.PHYSANIM_COLOURS = window.PHYSANIM_COLOURS || {};\n"
+            text += f"window.PHYSANIM_COLOURS[{json.dumps(label)}] = "
+            text += f"{json.dumps({'rgb': packed, 'legend': legend})};\n"
         (assets / name).write_text(text)
         names.append(name)
     tags = "".join(
@@ -84,6 +103,8 @@ _PAGE = """<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>
  <input id='frame' type='range' min='0' max='0' step='1' value='0'>
  <span id='label'>frame 0</span>
  <select id='model'></select>
+ <label id='errorbox' hidden><input id='error' type='checkbox'> error</label>
+ <span id='legend'></span>
 </div>
 __SCRIPTS__
 <script>
@@ -105,6 +126,8 @@ __SCRIPTS__
   var slider = document.getElementById('frame'), play = document.getElementById('play');
   var text = document.getElementById('label'), pick = document.getElementById('model');
   var hash = /frame=(\\d+)/.exec(window.location.hash);
+  var errorBox = document.getElementById('error'), legend = document.getElementById('legend');
+  var colouring = /error=1/.test(window.location.hash), notes = [];
 
   function resize() {
     renderer.setSize(window.innerWidth, window.innerHeight);
@@ -115,6 +138,16 @@ __SCRIPTS__
     var raw = atob(b64), out = new Uint8Array(raw.length);
     for (var i = 0; i < raw.length; i++) out[i] = raw.charCodeAt(i);
     return out.buffer;
+  }
+  function paint() {
+    models.forEach(function (m) {
+      m.meshes.forEach(function (o) {
+        o.material = colouring && o.userData.errorMaterial ? o.userData.errorMaterial
+                                                           : o.userData.plainMaterial;
+      });
+    });
+    var c = window.PHYSANIM_COLOURS && window.PHYSANIM_COLOURS[labels[current]];
+    legend.textContent = colouring && c ? c.legend : '';
   }
   function show(f) {
     frame = Math.max(0, Math.min(times.length - 1, f));
@@ -150,19 +183,38 @@ __SCRIPTS__
     times = models[0].times;
     slider.max = times.length - 1;
     frameCamera(models[0].root);
+    if (window.PHYSANIM_COLOURS) { document.getElementById('errorbox').hidden = false; }
+    errorBox.checked = colouring;
+    paint();
     if (hash) { playing = false; play.textContent = 'play'; show(parseInt(hash[1], 10)); }
     else show(0);
-    status.textContent = 'ready: ' + models.length + ' models, ' + times.length + ' frames';
+    status.textContent = 'ready: ' + models.length + ' models, ' + times.length + ' frames' +
+      (colouring ? ', error colours' : '') + notes.join('');
   }
   labels.forEach(function (label, i) {
     new THREE.GLTFLoader().parse(bytes(window.PHYSANIM_GLB[label]), '', function (gltf) {
-      var root = gltf.scene;
+      var root = gltf.scene, meshes = [];
+      var given = window.PHYSANIM_COLOURS && window.PHYSANIM_COLOURS[label];
       root.traverse(function (o) {
         if (o.isMesh) {
           o.frustumCulled = false;
-          o.material = new THREE.MeshStandardMaterial({
-            color: 0xe0cfb1, roughness: 0.75, side: THREE.DoubleSide,
-            morphTargets: true, morphNormals: !!o.geometry.morphAttributes.normal });
+          var look = {roughness: 0.75, side: THREE.DoubleSide, morphTargets: true,
+                      morphNormals: !!o.geometry.morphAttributes.normal};
+          o.userData.plainMaterial = new THREE.MeshStandardMaterial(
+            Object.assign({color: 0xe0cfb1}, look));
+          if (given) {
+            var rgb = new Uint8Array(bytes(given.rgb));
+            if (rgb.length === 3 * o.geometry.attributes.position.count) {
+              o.geometry.setAttribute('color', new THREE.BufferAttribute(rgb, 3, true));
+              o.userData.errorMaterial = new THREE.MeshStandardMaterial(
+                Object.assign({color: 0xffffff, vertexColors: THREE.VertexColors}, look));
+            } else {
+              notes.push('; ' + label + ': ' + (rgb.length / 3) + ' colours for ' +
+                         o.geometry.attributes.position.count + ' vertices, shown plain');
+            }
+          }
+          o.material = o.userData.plainMaterial;
+          meshes.push(o);
         }
       });
       var mixer = new THREE.AnimationMixer(root), clip = gltf.animations[0];
@@ -174,14 +226,15 @@ __SCRIPTS__
         action.play();
       }
       scene.add(root);
-      models[i] = {root: root, mixer: mixer, action: action,
+      models[i] = {root: root, mixer: mixer, action: action, meshes: meshes,
                    times: clip ? Array.prototype.slice.call(clip.tracks[0].times) : [0]};
       if (models.filter(Boolean).length === labels.length) loaded();
     }, function (err) { status.textContent = 'error: ' + (err.message || err); });
   });
   play.onclick = function () { playing = !playing; play.textContent = playing ? 'pause' : 'play'; };
   slider.oninput = function () { playing = false; play.textContent = 'play'; show(+slider.value); };
-  pick.onchange = function () { current = +pick.value; show(frame); };
+  pick.onchange = function () { current = +pick.value; paint(); show(frame); };
+  errorBox.onchange = function () { colouring = errorBox.checked; paint(); };
   window.addEventListener('resize', resize);
   resize();
   var last = null;

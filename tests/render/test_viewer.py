@@ -71,6 +71,40 @@ def test_viewer_plays_the_exported_animation(tmp_path: Path) -> None:
     assert shots[9][1] > shots[0][1] + 10
 
 
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium (make setup-test-system)")
+@pytest.mark.skipif(not three_available(), reason=THREE_MISSING)
+def test_viewer_colours_each_vertex_by_its_error_on_request(tmp_path: Path) -> None:
+    """Error colours for the FEM's vertices (the image-left half purple, the rest white):
+    with #error=1 the sheet's left half is purple (blue over green) and its right half
+    light, without it both are skin (red over blue); colours of the wrong count are refused
+    in the status, and the model is shown plain."""
+    vertices, faces = sheet()
+    animation = MeshAnimation("fem", np.stack([vertices, vertices]), faces, 30.0)
+    glb = write_glb(morph_animation(animation, 1e-5, 4), faces, tmp_path / "fem.glb", "fem")
+    rgb = np.where((vertices[:, 0] < np.median(vertices[:, 0]))[:, None], [110, 20, 130], 255)
+    legend = "largest error vs truth: white 0 to purple 1.00 mm and above"
+    page = write_viewer(tmp_path / "report", {"FEM": glb}, colours={"FEM": (rgb, legend)})
+    dom = chromium(page.as_uri() + "#frame=0&error=1", "--dump-dom")
+    assert "ready: 1 models, 2 frames, error colours" in dom and legend in dom, dom[-2000:]
+    halves = {}
+    for colouring in (True, False):
+        png = tmp_path / f"error{colouring}.png"
+        chromium(f"{page.as_uri()}#frame=0{'&error=1' if colouring else ''}", f"--screenshot={png}")
+        img = np.asarray(Image.open(png).convert("RGB"))[40:-60].astype(int)
+        mesh = np.abs(img - BACKGROUND).sum(axis=-1) > 30
+        cols = np.nonzero(mesh.any(axis=0))[0]
+        mid = (cols.min() + cols.max()) // 2
+        halves[colouring] = [img[:, a:b][mesh[:, a:b]].mean(axis=0)
+                             for a, b in ((cols.min(), mid), (mid, cols.max() + 1))]  # fmt: skip
+    print("mean colour of the left and right halves", halves)
+    (left, right), (plain_left, plain_right) = halves[True], halves[False]
+    assert left[2] > left[1] + 30 and right.min() > left.min() + 40
+    assert plain_left[0] > plain_left[2] + 20 and plain_right[0] > plain_right[2] + 20
+    wrong = write_viewer(tmp_path / "wrong", {"FEM": glb}, colours={"FEM": (rgb[:-1], legend)})
+    dom = chromium(wrong.as_uri() + "#frame=0&error=1", "--dump-dom")
+    assert f"FEM: {len(rgb) - 1} colours for {len(rgb)} vertices, shown plain" in dom
+
+
 def test_viewer_names_what_is_missing(tmp_path: Path) -> None:
     """No model file, or no three.js where it is looked for: FileNotFoundError naming it."""
     with pytest.raises(FileNotFoundError, match="nothing.glb"):
