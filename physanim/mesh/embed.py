@@ -54,7 +54,7 @@ def embedding_matrix(
     k = min(candidates, len(tets))
     near = tree.query(p, k=k)[1].reshape(len(p), k)
     rows = np.repeat(np.arange(len(p)), k)
-    chosen, weights = _least_outside(p, point_side, nodes, tets, tet_side, rows, near.ravel())
+    chosen, weights = _containing(p, point_side, nodes, tets, tet_side, rows, near.ravel())
     missed = np.flatnonzero(chosen < 0)
     if len(missed):
         # a tet contains a point only within its largest centroid-to-corner distance
@@ -62,7 +62,7 @@ def embedding_matrix(
         found = tree.query_ball_point(p[missed], reach)
         rows = np.repeat(missed, [len(f) for f in found])
         tried = np.fromiter((t for f in found for t in f), np.int64, len(rows))
-        again = _least_outside(p, point_side, nodes, tets, tet_side, rows, tried)
+        again = _containing(p, point_side, nodes, tets, tet_side, rows, tried)
         chosen[missed], weights[missed] = again[0][missed], again[1][missed]
     inside = np.flatnonzero(chosen >= 0)
     within = sp.csr_array(
@@ -72,7 +72,7 @@ def embedding_matrix(
     return within + on_boundary(p, point_side, nodes, tets, tet_side, chosen < 0)
 
 
-def _least_outside(
+def _containing(
     points: NDArray,
     point_side: NDArray,
     nodes: NDArray,

@@ -385,14 +385,15 @@ def fill_motion(
     measured = np.where(observed[..., None], obs.displacement.transpose(1, 0, 2), 0.0)
     measured -= base[:, seen_idx].transpose(1, 0, 2)
     prior_columns = base.transpose(1, 0, 2).reshape(n, T * 3)
+    # (S + lam L) u = S (prior + du) + lam L_unseen prior: the motion u over (N, T, 3)
+    prior_pull = lam * (towards_unseen @ prior_columns)
     keep = observed.copy()
     for _ in range(params.fill_iterations):
         # the seen vertices a frame does not observe (or observes as an outlier) get the
         # harmonic extension of the kept ones, so the smoother's weights stay those of the
         # seen vertices and one factorisation serves every frame
         du = np.stack([_harmonic_fill(seen_graph, keep[:, t], measured[:, t]) for t in range(T)], 1)
-        # (S + lam L) u = S (prior + du) + lam L_unseen prior, the motion u over (N, T, 3)
-        rhs = lam * (towards_unseen @ prior_columns) if prior is not None else np.zeros((n, T * 3))
+        rhs = prior_pull.copy()
         rhs[seen_idx] += prior_columns[seen_idx] + du.reshape(len(seen_idx), T * 3)
         fit = solve(rhs).reshape(n, T, 3) - base.transpose(1, 0, 2)  # the departure
         keep = observed & (np.linalg.norm(fit[seen_idx] - measured, axis=2) < params.outlier_m)
