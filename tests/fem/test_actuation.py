@@ -122,6 +122,11 @@ def test_stress_basis_is_a_smooth_partition_of_unity_covering_the_mesh():
     forces = basis.force_matrix(model_force_operator(model)) @ c.ravel()
     direct = -(model_force_operator(model) @ basis.stress(c).ravel())
     np.testing.assert_allclose(forces, direct, atol=1e-12 * np.abs(direct).max())
+    # Actuation.force gives the same forces at each frame on the free DOFs asked for
+    free = np.arange(0, model.n_dofs, 2)
+    per_frame = Actuation(basis, np.stack([c, 2 * c, -c])).force(model, free, 0.1).values
+    expected = np.stack([forces, 2 * forces, -forces])[:, free]
+    np.testing.assert_allclose(per_frame, expected, atol=1e-12 * np.abs(direct).max())
     # an unloaded body is in equilibrium: active forces sum to zero force and moment
     f = forces.reshape(-1, 3)
     np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12 * np.abs(f).max())
