@@ -42,6 +42,7 @@ def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraPara
     """nodes (n,3) m, tets (m,4), skin/bone masks, lip sides, landmark nodes, skin anchors;
     quality report in attrs."""
     from physanim.mesh.seam import cut_tets
+    from physanim.mesh.sizing import region_quality, regional_sizing
     from physanim.mesh.tetra import (
         label_nodes,
         landmark_nodes,
@@ -64,8 +65,13 @@ def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraPara
     if params.mesh_file:
         mesh, quality = load_tet_mesh(params.mesh_file, surface.vertices, surface.faces, params)
     else:
-        mesh, quality = tetrahedralize_surface(surface.vertices, surface.faces, params)
+        graded = None
+        if params.refine.enabled:
+            skin = surface.vertices[: surface.n_skin]
+            graded = regional_sizing(skin, align.landmark_positions(), params)
+        mesh, quality = tetrahedralize_surface(surface.vertices, surface.faces, params, graded)
     report(1, 1)
+    regions = region_quality(mesh.nodes, mesh.tets, align.landmark_positions(), params.refine)
     mouth = align.mouth()
     cut, hinged = cut_tets(mesh.nodes, mesh.tets, mouth).face_connected()
     nodes = cut.nodes(mesh.nodes)
@@ -75,13 +81,13 @@ def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraPara
         nodes, skin, cut.side, align.landmarks, mouth.side(align.landmarks)
     )
     summary = dict(
-        quality.as_dict(), lip_seam_faces=cut.n_seam_faces,
+        quality.as_dict(), regions=regions, lip_seam_faces=cut.n_seam_faces,
         seam_nodes=len(nodes) - len(np.unique(cut.parent)), hinged_tets_dropped=hinged,
     )  # fmt: skip
     return TetraOutput(
         nodes, cut.elements, skin, bone, cut.side, landmark_node, landmark_distance,
-        skin_anchors(nodes, bone, surface), surface.thickness, quality.as_dict(),
-        summary=summary,
+        skin_anchors(nodes, bone, surface), surface.thickness,
+        dict(quality.as_dict(), regions=regions), summary=summary,
     )  # fmt: skip
 
 
@@ -96,8 +102,9 @@ def fingerprint(dataset: DatasetParams, params: TetraParams) -> Mapping[str, Any
 SPEC = StageSpec.typed(
     "tetra",
     compute,
-    version="4",
-    doc="tissue volume (skin + bone-side offset), fTetWild tets, quality, node labels",
+    version="5",
+    doc="tissue volume (skin + bone-side offset), fTetWild tets (optionally finer in named "
+    "regions, coarser deep), quality per region, node labels",
     fingerprint=fingerprint,
     varies=True,  # fTetWild's mesh differs from run to run, even on one thread
 )

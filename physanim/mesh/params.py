@@ -122,6 +122,68 @@ class AlignParams(BaseModel):
     )
 
 
+class RefineRegion(BaseModel):
+    """One region of finer tets: within ``radius_m`` of any of its feature points."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    landmarks: tuple[str, ...] = Field(
+        min_length=1, description="Feature points (physanim.face.landmarks names) it surrounds."
+    )
+    radius_m: float = Field(gt=0.0, le=0.1, description="Radius about each point, metres.")
+    edge_length_m: float = Field(
+        gt=1e-4, le=0.05, description="Target tet edge length inside the radius, metres."
+    )
+
+
+#: The regions ``tetra.refine`` grades finer by default: the lips and mouth corners (where the
+#: lip gap, the philtrum and the mouth-corner figures are measured) and the eyelids.
+DEFAULT_REFINE_REGIONS: dict[str, RefineRegion] = {
+    "lips": RefineRegion(
+        landmarks=("ch_L", "ch_R", "cphs_L", "cphs_R", "cphi_L", "cphi_R"),
+        radius_m=0.012,
+        edge_length_m=0.002,
+    ),
+    "eyelids": RefineRegion(
+        landmarks=("ex_L", "ex_R", "pi_L", "pi_R"), radius_m=0.01, edge_length_m=0.0025
+    ),
+}
+
+
+class RefineParams(BaseModel):
+    """Regional refinement of the tet sizing field (``tetra.refine``): finer tets in named
+    regions, coarser ones deep in the tissue, ``tetra.edge_length_m`` elsewhere at the skin."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    enabled: bool = Field(False, description="Grade the sizing field (false: uniform tets).")
+    regions: dict[str, RefineRegion] = Field(
+        default_factory=lambda: dict(DEFAULT_REFINE_REGIONS),
+        description="Named regions of finer tets (name -> landmarks, radius_m, edge_length_m).",
+    )
+    blend_m: float = Field(
+        0.008,
+        gt=0.0,
+        le=0.1,
+        description="Width beyond a region's radius over which its edge length grades into "
+        "the surrounding one, metres.",
+    )
+    deep_edge_length_m: float | None = Field(
+        0.005,
+        gt=1e-4,
+        le=0.05,
+        description="Target edge length deep in the tissue, outside every region, metres. "
+        "null: edge_length_m through the thickness.",
+    )
+    deep_depth_m: float = Field(
+        0.006,
+        gt=0.0,
+        le=0.05,
+        description="Depth below the skin at which deep_edge_length_m is reached (linear from "
+        "the skin's edge length), metres.",
+    )
+
+
 class TetraParams(BaseModel):
     """Soft-tissue volume and tetrahedralisation (the ``tetra`` stage)."""
 
@@ -228,6 +290,9 @@ class TetraParams(BaseModel):
         description="Tets with |volume| below this times edge_length_m^3 are degenerate "
         "(dimensionless).",
     )
+    refine: RefineParams = Field(
+        default_factory=RefineParams, description="regional refinement of the sizing field"
+    )
     label_tolerance_rel: float = Field(
         0.3,
         gt=0.0,
@@ -236,11 +301,27 @@ class TetraParams(BaseModel):
         "are labelled skin (bone) nodes (dimensionless).",
     )
 
+    @model_validator(mode="after")
+    def _refined_needs_sizing(self) -> TetraParams:
+        if self.refine.enabled and self.outside_edge_length_m is None:
+            raise ValueError(
+                "tetra.refine.enabled needs tetra.outside_edge_length_m (the sizing field's "
+                "coarse length outside the tissue); set it, e.g. 0.02"
+            )
+        return self
+
     @property
     def ftetwild_edge_length_m(self) -> float:
         """fTetWild's global target edge length, m: the coarsest its sizing field asks for
         (``outside_edge_length_m``; ``edge_length_m`` when that is null)."""
         return max(self.edge_length_m, self.outside_edge_length_m or 0.0)
+
+    @property
+    def finest_edge_length_m(self) -> float:
+        """The smallest target edge length asked for anywhere, m (a refined region's, when
+        ``refine.enabled``)."""
+        regions = [r.edge_length_m for r in self.refine.regions.values()]
+        return min([self.edge_length_m, *regions]) if self.refine.enabled else self.edge_length_m
 
 
 class MaterialsParams(BaseModel):

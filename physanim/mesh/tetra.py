@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,17 @@ from scipy.spatial import Delaunay, cKDTree
 from physanim.mesh.binding import bind_points
 from physanim.mesh.params import TetraParams
 from physanim.mesh.tissue import PART_BONE, PART_SKIN, TissueSurface
+
+
+@dataclass(frozen=True)
+class Sizing:
+    """A graded target tet edge length (:mod:`physanim.mesh.sizing`): ``lengths`` maps points
+    (P, 3) m to (P,) m; ``detail`` (D, 3) m are extra points of the background mesh where the
+    length varies faster than its coarse grid resolves (about a refined region)."""
+
+    lengths: Callable[[np.ndarray], np.ndarray]
+    detail: np.ndarray
+
 
 #: The 6 edges (i, j) of a tet and the two vertices (k, l) opposite each: the faces opposite k
 #: and l meet along edge (i, j).
@@ -102,13 +114,13 @@ def orient_and_check(
 
     Raises:
         TetMeshError: on an empty mesh or degenerate tets (|volume| below
-            ``degenerate_volume_rel * edge_length_m^3``).
+            ``degenerate_volume_rel * finest_edge_length_m^3``).
     """
     tets = np.asarray(tets, dtype=np.int64).copy()
     if tets.ndim != 2 or tets.shape[1] != 4 or len(tets) == 0:
         raise TetMeshError(f"tets must be a non-empty (m, 4) array, got {tets.shape}")
     vol = tet_volumes(nodes, tets)
-    tiny = params.degenerate_volume_rel * params.edge_length_m**3
+    tiny = params.degenerate_volume_rel * params.finest_edge_length_m**3
     bad = np.abs(vol) <= tiny
     if np.any(bad):
         raise TetMeshError(
@@ -173,17 +185,20 @@ def inside_closed_surface(
 
 
 def sizing_field(
-    vertices: np.ndarray, faces: np.ndarray, params: TetraParams
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    params: TetraParams,
+    graded: Sizing | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """fTetWild's background mesh: its vertices (B, 3) m, tets (T, 4) int32 and target edge
-    length (B,) m, ``edge_length_m`` inside the closed surface (``vertices`` (N, 3) m,
-    ``faces`` (F, 3)) and within one edge length of it, growing by ``outside_growth`` per
-    metre of distance beyond, up to ``outside_edge_length_m``.
+    length (B,) m: ``graded``'s length at the point (default ``edge_length_m`` everywhere) inside
+    the closed surface (``vertices`` (N, 3) m, ``faces`` (F, 3)) and within one edge length
+    of it, growing by ``outside_growth`` per metre of distance beyond, up to
+    ``outside_edge_length_m``.
 
     fTetWild meshes the whole bounding box and keeps the tets inside the surface only at the
     end; for a thin curved shell such as the face's tissue most of its work went into tets
     it then discarded (measured: about 85 %). A coarse target outside halves its time."""
-    h = params.edge_length_m
     far = params.ftetwild_edge_length_m
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     # fTetWild's box extends 1/15 of the largest extent beyond the surface; a point outside
@@ -191,19 +206,32 @@ def sizing_field(
     margin = 0.25 * float((hi - lo).max()) + far
     axes = [np.arange(lo[i] - margin, hi[i] + margin + 0.5 * far, 0.5 * far) for i in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    distance = distance_to_surface(grid, vertices, faces)
-    values = np.clip(h + params.outside_growth * (distance - h), h, far)
-    values[inside_closed_surface(grid, vertices, faces)] = h
+    if graded is not None:
+        grid = np.r_[grid, graded.detail]
     points = np.r_[vertices, grid]
+    h = (
+        np.full(len(points), params.edge_length_m)
+        if graded is None
+        else np.asarray(graded.lengths(points), dtype=np.float64)
+    )
+    hg = h[len(vertices) :]
+    distance = distance_to_surface(grid, vertices, faces)
+    values = np.clip(hg + params.outside_growth * (distance - hg), hg, max(far, hg.max()))
+    inside = inside_closed_surface(grid, vertices, faces)
+    values[inside] = hg[inside]
     tets = Delaunay(points).simplices.astype(np.int32)
-    return points, tets, np.r_[np.full(len(vertices), h), values]
+    return points, tets, np.r_[h[: len(vertices)], values]
 
 
 def tetrahedralize_surface(
-    vertices: np.ndarray, faces: np.ndarray, params: TetraParams
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    params: TetraParams,
+    graded: Sizing | None = None,
 ) -> tuple[TetMesh, TetQuality]:
-    """Tetrahedralise a closed surface with fTetWild at ``params.edge_length_m`` inside,
-    coarser outside where its tets are discarded (:func:`sizing_field`).
+    """Tetrahedralise a closed surface with fTetWild at ``graded``'s lengths inside (default
+    ``params.edge_length_m``; :mod:`physanim.mesh.sizing` grades it by region), coarser
+    outside where its tets are discarded (:func:`sizing_field`).
 
     fTetWild is not deterministic; while its mesh's smallest dihedral angle is below
     ``params.min_dihedral_deg`` it runs again, up to ``params.mesh_attempts`` runs, and the
@@ -219,8 +247,8 @@ def tetrahedralize_surface(
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int32)
     sizing: dict[str, np.ndarray] = {}
-    if params.ftetwild_edge_length_m > params.edge_length_m:
-        bg_vertices, bg_tets, bg_values = sizing_field(vertices, faces, params)
+    if graded is not None or params.ftetwild_edge_length_m > params.edge_length_m:
+        bg_vertices, bg_tets, bg_values = sizing_field(vertices, faces, params, graded)
         sizing = {"bg_vertices": bg_vertices, "bg_tets": bg_tets, "bg_values": bg_values}
     runs: list[tuple[TetMesh, TetQuality]] = []
     while len(runs) < params.mesh_attempts:

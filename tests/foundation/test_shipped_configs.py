@@ -27,6 +27,7 @@ OVERLAYS: dict[str, Pipeline] = {
     "materials/*.yaml": FACE,
     "drives/*.yaml": FACE,
     "gestures/*.yaml": FACE,
+    "meshes/*.yaml": FACE,
     "keyframe_walk.yaml": KEYFRAME,
 }
 DEFAULTS = {p.default_config.relative_to(CONFIGS).as_posix(): p for p in (FACE, ARM, KEYFRAME)}
