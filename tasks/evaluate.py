@@ -102,7 +102,7 @@ def compute(
 SPEC = StageSpec.typed(
     "evaluate",
     compute,
-    version="12",
+    version="13",
     doc="symmetry cost, mouth corners, lag, philtrum peaks; with truth: motion fidelity per "
     "region, lip gap, surface distance, silhouettes and triangle stretch of the moved scan",
     fingerprint=fingerprint,
