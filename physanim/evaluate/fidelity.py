@@ -1,9 +1,9 @@
 """Motion fidelity: how well a simulated skin reproduces the true motion of the actor's skin.
 
-Skin points of a model (a sample of scan vertices moved by the FEM or by the capture) are bound to the actor's true
-neutral surface at frame 0 (closest point, barycentric weights) and followed through the true
-motion, which gives each point's true displacement ``u_true(t)``.  The relative displacement
-error of a set of points at frame t is
+Skin points of a model (a sample of scan vertices moved by the FEM or by the capture) are
+bound to the actor's true neutral surface at frame 0 (closest point, barycentric weights)
+and followed through the true motion, which gives each point's true displacement
+``u_true(t)``.  The relative displacement error of a set of points at frame t is
 
     e(t) = sqrt(mean |u_model - u_true|^2) / sqrt(mean |u_true|^2)
 
