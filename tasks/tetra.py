@@ -62,16 +62,17 @@ def compute(params: TetraParams, align: AlignOutput, ctx: StageContext[TetraPara
     )
     report = ctx.progress("tetra")
     report(0, 1)
+    feature_points = align.landmark_positions()
     if params.mesh_file:
         mesh, quality = load_tet_mesh(params.mesh_file, surface.vertices, surface.faces, params)
     else:
         graded = None
         if params.refine.enabled:
             skin = surface.vertices[: surface.n_skin]
-            graded = regional_sizing(skin, align.landmark_positions(), params)
+            graded = regional_sizing(skin, feature_points, params)
         mesh, quality = tetrahedralize_surface(surface.vertices, surface.faces, params, graded)
     report(1, 1)
-    regions = region_quality(mesh.nodes, mesh.tets, align.landmark_positions(), params.refine)
+    regions = region_quality(mesh.nodes, mesh.tets, feature_points, params.refine)
     mouth = align.mouth()
     cut, hinged = cut_tets(mesh.nodes, mesh.tets, mouth).face_connected()
     nodes = cut.nodes(mesh.nodes)

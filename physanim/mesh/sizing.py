@@ -14,8 +14,20 @@ from collections.abc import Mapping
 import numpy as np
 from scipy.spatial import cKDTree
 
-from physanim.mesh.params import RefineParams, TetraParams
-from physanim.mesh.tetra import Sizing, dihedral_angles
+from physanim.mesh.params import RefineParams, RefineRegion, TetraParams
+from physanim.mesh.tetra import Sizing, box_grid, dihedral_angles, edge_lengths
+
+
+def _centres(name: str, region: RefineRegion, landmarks: Mapping[str, np.ndarray]) -> np.ndarray:
+    """(K, 3) m: the feature points region ``name`` surrounds; ValueError naming the config
+    key when ``landmarks`` lacks one."""
+    missing = [n for n in region.landmarks if n not in landmarks]
+    if missing:
+        raise ValueError(
+            f"tetra.refine.regions.{name}.landmarks: {missing} not among the aligned "
+            f"feature points {sorted(landmarks)}"
+        )
+    return np.array([landmarks[n] for n in region.landmarks], dtype=np.float64)
 
 
 def region_weights(
@@ -29,13 +41,7 @@ def region_weights(
     """
     out = {}
     for name, region in refine.regions.items():
-        missing = [n for n in region.landmarks if n not in landmarks]
-        if missing:
-            raise ValueError(
-                f"tetra.refine.regions.{name}.landmarks: {missing} not among the aligned "
-                f"feature points {sorted(landmarks)}"
-            )
-        centres = np.array([landmarks[n] for n in region.landmarks], dtype=np.float64)
+        centres = _centres(name, region, landmarks)
         distance = cKDTree(centres).query(np.asarray(points, dtype=np.float64))[0]
         out[name] = np.clip(1.0 - (distance - region.radius_m) / refine.blend_m, 0.0, 1.0)
     return out
@@ -45,18 +51,14 @@ def detail_points(landmarks: Mapping[str, np.ndarray], refine: RefineParams) -> 
     """(D, 3) m: a grid at half ``blend_m`` spacing over every region's ball of radius
     ``radius_m + blend_m`` about its feature points, where the length grades faster than
     fTetWild's background grid (half the coarse outside length) resolves."""
-    spacing = 0.5 * refine.blend_m
-    centres, reach = [], []
-    for region in refine.regions.values():
-        for name in region.landmarks:
-            centres.append(np.asarray(landmarks[name], dtype=np.float64))
-            reach.append(region.radius_m + refine.blend_m)
-    if not centres:
+    if not refine.regions:
         return np.zeros((0, 3))
-    c, r = np.array(centres), np.array(reach)
+    balls = [(_centres(name, region, landmarks), region.radius_m + refine.blend_m)
+             for name, region in refine.regions.items()]  # fmt: skip
+    c = np.concatenate([centres for centres, _ in balls])
+    r = np.concatenate([np.full(len(centres), reach) for centres, reach in balls])
     lo, hi = (c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0)
-    axes = [np.arange(lo[i], hi[i] + spacing, spacing) for i in range(3)]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    grid = box_grid(lo, hi, 0.5 * refine.blend_m)
     near = np.zeros(len(grid), dtype=bool)
     for centre, radius in zip(c, r, strict=True):
         near |= np.linalg.norm(grid - centre, axis=1) <= radius
@@ -97,7 +99,6 @@ def regional_sizing(
             size = size + s * np.maximum(refine.deep_edge_length_m - size, 0.0)
         return size
 
-    lengths(np.zeros((0, 3)))  # a region naming an unknown feature point fails here
     return Sizing(lengths, detail_points(landmarks, refine))
 
 
@@ -110,9 +111,8 @@ def region_quality(
     """Per refinement region (tets whose centroid has weight 1, see :func:`region_weights`)
     and for the rest ('elsewhere'): tet count, median edge length (mm) and smallest dihedral
     angle (deg) of positive tets (m, 4) over nodes (n, 3) m."""
-    p = nodes[tets]
-    edges = np.linalg.norm(p[:, [0, 0, 0, 1, 1, 2]] - p[:, [1, 2, 3, 2, 3, 3]], axis=2)
-    weights = region_weights(p.mean(axis=1), landmarks, refine)
+    edges = edge_lengths(nodes, tets)
+    weights = region_weights(nodes[tets].mean(axis=1), landmarks, refine)
     members = {name: w >= 1.0 for name, w in weights.items()}
     elsewhere = np.ones(len(tets), dtype=bool)
     for m in members.values():

@@ -94,10 +94,22 @@ def dihedral_angles(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
+def edge_lengths(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Lengths (m, 6) of the 6 edges of tets (m, 4) over nodes (n, 3), in the node unit."""
+    p = nodes[tets]
+    return np.linalg.norm(p[:, _EDGES[:, 0]] - p[:, _EDGES[:, 1]], axis=2)
+
+
+def box_grid(lo: np.ndarray, hi: np.ndarray, spacing: float) -> np.ndarray:
+    """(G, 3) points of a regular grid of ``spacing`` from ``lo`` (3,) covering ``hi`` (3,)."""
+    axes = [np.arange(lo[i], hi[i] + spacing, spacing) for i in range(3)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
 def aspect_ratios(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """Aspect ratio (m,) = longest edge / (2 sqrt(6) inradius); 1 for a regular tet."""
     p = nodes[tets]
-    edges = np.linalg.norm(p[:, _EDGES[:, 0]] - p[:, _EDGES[:, 1]], axis=2)
+    edges = edge_lengths(nodes, tets)
     f = p[:, _OPPOSITE]
     areas = 0.5 * np.linalg.norm(
         np.cross(f[:, :, 1] - f[:, :, 0], f[:, :, 2] - f[:, :, 0]), axis=2
@@ -204,8 +216,7 @@ def sizing_field(
     # fTetWild's box extends 1/15 of the largest extent beyond the surface; a point outside
     # the background mesh would get its global (coarse) length
     margin = 0.25 * float((hi - lo).max()) + far
-    axes = [np.arange(lo[i] - margin, hi[i] + margin + 0.5 * far, 0.5 * far) for i in range(3)]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    grid = box_grid(lo - margin, hi + margin, 0.5 * far)
     if graded is not None:
         grid = np.r_[grid, graded.detail]
     points = np.r_[vertices, grid]

@@ -11,6 +11,7 @@ from physanim.mesh.tetra import (
     boundary_faces,
     dihedral_angles,
     distance_to_surface,
+    edge_lengths,
     inside_closed_surface,
     label_nodes,
     landmark_nodes,
@@ -177,8 +178,7 @@ def test_coarse_face_tets_are_positive_and_labelled(skin, landmarks):
     scale = (TetraParams().edge_length_m / params.edge_length_m) ** 3
     assert 5_000 * scale * 0.5 <= q.n_nodes <= 10_000 * scale * 1.5
     # the coarse target outside the tissue (sizing_field) does not reach inside it
-    p = mesh.nodes[mesh.tets]
-    edges = np.linalg.norm(p[:, [0, 0, 0, 1, 1, 2]] - p[:, [1, 2, 3, 2, 3, 3]], axis=2)
+    edges = edge_lengths(mesh.nodes, mesh.tets)
     assert np.median(edges) <= 1.2 * params.edge_length_m
     lm = np.array([landmarks[n] for n in FEATURE_POINTS])
     labels = label_nodes(mesh, surface, params)
@@ -261,9 +261,8 @@ def test_a_refined_mesh_is_finer_in_its_region_and_coarser_deep():
     params = TetraParams(edge_length_m=0.006, outside_edge_length_m=0.03, refine=refine)
     mesh, q = tetrahedralize_surface(v, f, params, regional_sizing(top, centre, params))
     assert q.volume_m3 == pytest.approx(float(np.prod(size)), rel=0.02)
-    p = mesh.nodes[mesh.tets]
-    edges = np.linalg.norm(p[:, [0, 0, 0, 1, 1, 2]] - p[:, [1, 2, 3, 2, 3, 3]], axis=2)
-    centroid = p.mean(axis=1)
+    edges = edge_lengths(mesh.nodes, mesh.tets)
+    centroid = mesh.nodes[mesh.tets].mean(axis=1)
     depth = 0.03 - centroid[:, 2]
     far = np.linalg.norm(centroid - centre["ch_L"], axis=1) > region.radius_m + refine.blend_m
     quality = region_quality(mesh.nodes, mesh.tets, centre, refine)
