@@ -106,6 +106,6 @@ def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[s
 SPEC = StageSpec.typed(
     "dense",
     compute,
-    version="3",
+    version="4",
     doc="captured motion of every scan vertex: dense capture (flow + depth) or the kinematic scan",
 )

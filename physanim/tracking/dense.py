@@ -13,7 +13,8 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    and the measured surface cancels from the motion.
 2. **Flow.** OpenCV's DIS optical flow from the neutral colour frame to frame t, and back, in
    the window the face reaches under the tracker's head poses (:func:`flow_window`); the
-   vertex's pixel at t is its neutral pixel plus the flow. Where the backward flow does not
+   vertex's pixel at t is its neutral pixel plus the forward flow, averaged with the backward
+   flow's estimate (``flow_two_way``). Where the backward flow does not
    return it within ``max_flow_error_px`` (occlusion, the inside of the open mouth, flow
    failure) the vertex is not observed at t.
 3. **Lift.** The depth at that pixel (Gaussian-smoothed with invalid pixels left out) gives
@@ -117,6 +118,7 @@ def _flow_engine(params: DenseParams) -> cv2.DISOpticalFlow:
     dis.setPatchStride(min(params.flow_stride_px, params.flow_patch_px))
     dis.setGradientDescentIterations(params.flow_iterations)
     dis.setVariationalRefinementIterations(params.flow_refinement_iterations)
+    dis.setVariationalRefinementAlpha(params.flow_smoothness)
     return dis
 
 
@@ -181,6 +183,10 @@ def _frame_points(
     uv = view.uv + sample(forward, view.uv)
     back = uv + sample(backward, uv)
     fb = np.linalg.norm(back - view.uv, axis=1)
+    if params.flow_two_way:
+        # the backward flow's own estimate of the pixel is the forward one moved back by the
+        # disagreement; their mean averages the two flows' independent errors
+        uv = uv - 0.5 * (back - view.uv)
     # the change of depth, pulled back to the neutral frame's pixels by the flow, is smooth
     # where the depth itself is not (lip edges, the nose tip): smoothed, it is not biased there.
     # Pixels whose flow does not come back (occluded or disoccluded: the inside of an opening

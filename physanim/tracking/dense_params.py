@@ -30,12 +30,28 @@ class DenseParams(BaseModel):
         description="the flow is computed in the window the scan covers under the tracker's "
         "head poses, widened by this much on each side; px",
     )  # fmt: skip
-    flow_stride_px: int = Field(2, ge=1, le=16, description="DIS flow: patch stride; px")
+    flow_stride_px: int = Field(
+        1, ge=1, le=16,
+        description="DIS flow: patch stride (1: a patch at every pixel, which follows the "
+        "lips' rolling where a stride of 2 lost them); px",
+    )  # fmt: skip
     flow_iterations: int = Field(
         16, ge=1, le=200, description="DIS flow: gradient-descent iterations per patch; count"
     )
     flow_refinement_iterations: int = Field(
         5, ge=0, le=50, description="DIS flow: variational refinement iterations; count"
+    )
+    flow_smoothness: float = Field(
+        10.0,
+        gt=0.0,
+        le=100.0,
+        description="DIS flow: smoothness weight of the variational refinement (OpenCV's "
+        "alpha; its default 20 blurs the motion across the lip edges); 1",
+    )
+    flow_two_way: bool = Field(
+        True,
+        description="a vertex's pixel at t is the mean of the forward flow's estimate and "
+        "the backward flow's (the forward one moved back by half their disagreement); bool",
     )
     depth_sigma_px: float = Field(
         2.5, ge=0.0, le=10.0, description="Gaussian smoothing of the depth before lifting; px"
@@ -49,7 +65,7 @@ class DenseParams(BaseModel):
         0.3, ge=0.0, lt=1.0, description="vertices seen more obliquely are not observed; 1"
     )
     max_flow_error_px: float = Field(
-        1.0, gt=0.0, le=20.0,
+        1.5, gt=0.0, le=20.0,
         description="forward-backward flow disagreement above which a vertex is not "
         "observed in that frame (occluded, inside the open mouth); px",
     )  # fmt: skip
