@@ -62,6 +62,7 @@ def face_run(
         displacements=disp,
         driven=np.union1d(simulate.driven_nodes, simulate.spring_nodes),
         tet_labels=materials.tet_labels,
+        scan_labels=materials.scan_labels,
         region_names=materials.region_names,
         mouth=align.mouth(),
         scan_vertices=align.scan_vertices,
@@ -102,8 +103,9 @@ def compute(
 SPEC = StageSpec.typed(
     "evaluate",
     compute,
-    version="13",
-    doc="symmetry cost, mouth corners, lag, philtrum peaks; with truth: motion fidelity per "
+    version="14",
+    doc="symmetry cost, mouth corners, lags (free behind driven, FEM behind capture per "
+    "region), philtrum peaks; with truth: motion fidelity per "
     "region, lip gap, surface distance, silhouettes and triangle stretch of the moved scan",
     fingerprint=fingerprint,
 )

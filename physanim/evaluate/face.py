@@ -2,7 +2,9 @@
 
 Per variant (FEM skin at the landmark nodes, kinematic motion mesh, tracked landmarks with the
 head pose removed): the seed's symmetry cost and displacement curves; the lag of the free skin
-behind the driven nodes; the philtrum regions' peak displacement; and, with a ground truth
+behind the driven nodes; the lag of the FEM skin behind the captured scan per facial region
+(fractions of a frame: a more viscous region trails by about its Kelvin-Voigt time eta / E);
+the philtrum regions' peak displacement; and, with a ground truth
 (``physanim.evaluate.truth``), the motion fidelity per frame and facial region, the lip gap
 and the RMS point-to-surface distance of the FEM skin and of the kinematic scan, each on one
 sample of the scan's vertices (moved by the FEM through their embedding in the tets, and by the
@@ -76,7 +78,8 @@ class FaceRun:
     ``fem_landmarks``, ``kinematic_landmarks``, ``tracked_landmarks`` (T, L, 3) m the three
     variants' landmark trajectories (head frame); ``nodes`` (n, 3) m, ``tets`` (m, 4),
     ``skin`` (n,) bool, ``displacements`` (T, n, 3) m; ``driven`` the node ids the drive
-    holds; ``tet_labels`` (m,) into ``region_names``; ``mouth`` the lip seam;
+    holds; ``tet_labels`` (m,) and ``scan_labels`` (N,) into ``region_names``; ``mouth`` the
+    lip seam;
     ``scan_vertices`` (N, 3) m, ``scan_faces`` (F, 3), ``scan_side`` (N,), ``scan_parent``
     (N,) the uncut vertex of each, ``kinematic`` (T, N, 3) m (a Zarr array or numpy array,
     read by rows); ``times`` (T,) s of the frames; ``fps`` frames/s.
@@ -93,6 +96,7 @@ class FaceRun:
     displacements: NDArray
     driven: NDArray
     tet_labels: NDArray
+    scan_labels: NDArray
     region_names: list[str]
     mouth: MouthLine
     scan_vertices: NDArray
@@ -151,7 +155,9 @@ def evaluate_face(
 ) -> tuple[FaceEvaluation, dict[str, Any]]:
     """The measures of one run and its summary (rounded figures: mm, s, ratios); ``cache``
     keeps the scan's embedding in the tets (``physanim.mesh.embed``)."""
-    from physanim.evaluate.measures import driven_free_lag, landmark_measures
+    from physanim.evaluate.fidelity import REGIONS, face_regions
+    from physanim.evaluate.measures import driven_free_lag, landmark_measures, region_lags
+    from physanim.mesh.embed import embedded_displacements
     from physanim.names import name_index
 
     names = run.landmark_names
@@ -179,9 +185,30 @@ def evaluate_face(
     summary["philtrum_peak_mm"] = {
         side: round(float(curve.max()) * 1e3, 4) for side, curve in philtrum.items()
     }
+    # the FEM moves a sample of the scan's vertices as it moves the rendered scan: the same
+    # points for every tet mesh, compared with the captured scan's same vertices
+    scan_v = run.scan_vertices
+    rng = np.random.default_rng(0)
+    scan_idx = np.sort(rng.choice(len(scan_v), min(len(scan_v), params.error_max_points), False))
+    fem_scan = scan_v + embedded_displacements(
+        scan_v, run.scan_side, run.nodes, run.tets, run.mouth, disp, cache
+    )
+    labels = face_regions(scan_v[scan_idx], dict(zip(names, run.landmarks, strict=True)))
+    fem_moved = fem_scan[:, scan_idx] - scan_v[scan_idx]
+    captured = _rows(run.kinematic, scan_idx) - scan_v[scan_idx]
+    lags = {}
+    for names_of, labels_of in (
+        (REGIONS, labels), (run.region_names, run.scan_labels[scan_idx])
+    ):  # fmt: skip
+        lags |= region_lags(
+            fem_moved, captured, labels_of, names_of, params.max_lag_frames, params.min_motion_m
+        )
+    summary["lag_behind_capture_ms"] = {
+        k: None if v is None else round(v / run.fps * 1e3, 2) for k, v in lags.items()
+    }
     fields: dict[str, Any] = {}
     if truth is not None:
-        found, figures = _against_truth(run, truth, params, cache)
+        found, figures = _against_truth(run, truth, params, scan_idx, fem_scan, labels)
         fields.update(found)
         summary.update(figures)
     evaluation = FaceEvaluation(
@@ -225,30 +252,29 @@ def philtrum_curves(run: FaceRun) -> dict[str, NDArray]:
 
 
 def _against_truth(
-    run: FaceRun, truth: Truth, params: EvaluateParams, cache: FileCache | None
+    run: FaceRun,
+    truth: Truth,
+    params: EvaluateParams,
+    scan_idx: NDArray,
+    fem_scan: NDArray,
+    labels: NDArray,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Motion fidelity per frame and region, the lip gap, the surface distance and the
-    surface quality of the FEM skin and the kinematic scan against the truth: (output
-    fields, summary entries)."""
+    surface quality of the FEM skin and the kinematic scan against the truth, on the scan
+    vertices ``scan_idx`` (S,) with region ``labels`` (S,); ``fem_scan`` (T, N, 3) m the scan
+    moved by the FEM: (output fields, summary entries)."""
     from physanim.evaluate.fidelity import (
         REGIONS,
-        face_regions,
         follow_truth,
         lip_gap,
         lip_midline_points,
         motion_fidelity,
     )
     from physanim.evaluate.measures import surface_errors
-    from physanim.mesh.embed import embedded_displacements
 
-    disp, nodes, tets, mouth = run.displacements, run.nodes, run.tets, run.mouth
-    landmarks = dict(zip(run.landmark_names, run.landmarks, strict=True))
+    disp, mouth = run.displacements, run.mouth
     scan_v, scan_side = run.scan_vertices, run.scan_side
-    rng = np.random.default_rng(0)
-    scan_idx = np.sort(rng.choice(len(scan_v), min(len(scan_v), params.error_max_points), False))
     lips = list(lip_midline_points(mouth, scan_v, scan_side, params.lip_offset_m))
-    # the FEM moves the scan (and its lip points) as it moves the rendered one
-    fem_scan = scan_v + embedded_displacements(scan_v, scan_side, nodes, tets, mouth, disp, cache)
     fem_lips = fem_scan[:, lips] - scan_v[lips]
     search = params.closest_points
     # the true motion of every scan vertex: its lip points', its sample's, its silhouettes'
@@ -259,15 +285,13 @@ def _against_truth(
     # nodes, which the FEM's figure once used, crowd where a graded mesh is fine and weigh
     # that part of the face more: a 2 mm mesh refined at the lips read 0.175 at the jaw drop
     # against the uniform 2 mm mesh's 0.145)
-    models = {  # rest points, their motion, the lip points moved, the true motion
+    models = {  # their motion, the lip points moved, the true motion
         "fem": (
-            scan_v[scan_idx],
             fem_scan[:, scan_idx] - scan_v[scan_idx],
             scan_v[lips] + fem_lips,
             scan_truth[:, scan_idx],
         ),
         "kinematic": (
-            scan_v[scan_idx],
             _rows(kin, scan_idx) - scan_v[scan_idx],
             _rows(kin, np.asarray(lips)),
             scan_truth[:, scan_idx],
@@ -277,9 +301,8 @@ def _against_truth(
     fields: dict[str, Any] = {"peak_frames": peaks, "regions": list(REGIONS)}
     fields["lip_gap_truth"] = true_gap
     out: dict[str, Any] = {"peak_frames": peaks, "lip_gap_mm": {}, "fidelity": {}}
-    for label, (rest, moved, lip_pts, true) in models.items():
-        fid = motion_fidelity(moved, true, face_regions(rest, landmarks),
-                              params.min_motion_m)  # fmt: skip
+    for label, (moved, lip_pts, true) in models.items():
+        fid = motion_fidelity(moved, true, labels, params.min_motion_m)
         fields[f"fidelity_{label}"] = fid
         gap = lip_gap(lip_pts[:, 0], lip_pts[:, 1])
         fields[f"lip_gap_{label}"] = gap

@@ -8,7 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from physanim.evaluate.symmetry import displacement_curves, lag_frames, symmetry_cost
+from physanim.evaluate.symmetry import (
+    displacement_curves,
+    lag_frames,
+    subframe_lag,
+    symmetry_cost,
+)
 from physanim.mesh.binding import BINDERS
 
 
@@ -44,6 +49,35 @@ def driven_free_lag(displacements: NDArray, driven: NDArray, free: NDArray, max_
     """Frames by which free nodes' mean displacement trails the driven nodes' (T, n, 3) m."""
     mag = np.linalg.norm(displacements, axis=-1)
     return lag_frames(mag[:, driven].mean(axis=1), mag[:, free].mean(axis=1), max_lag)
+
+
+def region_lags(
+    model: NDArray,
+    reference: NDArray,
+    labels: NDArray,
+    names: Sequence[str],
+    max_lag: int,
+    min_motion_m: float,
+) -> dict[str, float | None]:
+    """Lag (frames, fractional; > 0 when the model trails) of the ``model``'s motion behind
+    the ``reference``'s, both (T, N, 3) m displacements of the same N points, overall and per
+    region (``labels`` (N,) indices into ``names``): of each set's mean displacement magnitude
+    per frame (:func:`~physanim.evaluate.symmetry.subframe_lag`). None where the reference
+    curve's range stays below a quarter of ``min_motion_m`` (a region that does not move has
+    no timing; a region's mean moves less than its moving points)."""
+    mag_model = np.linalg.norm(model, axis=-1)
+    mag_ref = np.linalg.norm(reference, axis=-1)
+    sets = {"overall": np.ones(len(labels), dtype=bool)}
+    sets |= {name: labels == i for i, name in enumerate(names)}
+    out: dict[str, float | None] = {}
+    for name, members in sets.items():
+        if not members.any():
+            out[name] = None
+            continue
+        ref, follower = mag_ref[:, members].mean(axis=1), mag_model[:, members].mean(axis=1)
+        moves = ref.max() - ref.min() >= 0.25 * min_motion_m
+        out[name] = subframe_lag(ref, follower, max_lag) if moves else None
+    return out
 
 
 def surface_errors(

@@ -96,6 +96,12 @@ def variant_row(summary: dict[str, Any]) -> dict[str, Any]:
         },
         "surface distance RMS FEM / kinematic (mm)": [surface.get("fem"), surface.get("kinematic")],
         "free-region lag (s)": summary.get("free_lag_s"),
+        **{
+            f"FEM behind the capture, {region} (ms)": summary.get("lag_behind_capture_ms", {}).get(
+                region
+            )
+            for region in ("overall", "Cheek")
+        },
     }
 
 

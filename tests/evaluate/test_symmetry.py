@@ -5,8 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physanim.evaluate.measures import landmark_measures
-from physanim.evaluate.symmetry import displacement_curves, lag_frames, symmetry_cost
+from physanim.evaluate.measures import landmark_measures, region_lags
+from physanim.evaluate.symmetry import (
+    displacement_curves,
+    lag_frames,
+    subframe_lag,
+    symmetry_cost,
+)
 
 NAMES = ["ch_L", "ex_L", "pi_L", "al_L", "cphi_L", "ch_R", "ex_R", "pi_R", "al_R", "cphi_R"]
 
@@ -58,3 +63,51 @@ def test_a_landmark_lost_in_some_frames_peaks_where_it_was_tracked() -> None:
     m = landmark_measures(both, ["a", "b", *NAMES])
     assert m.peak[0] == pytest.approx(0.003) and m.peak_frame[0] == 2
     assert np.isnan(m.peak[1])
+
+
+def expression(t: np.ndarray, shift: float = 0.0) -> np.ndarray:
+    """A smooth rise, hold and release (T,) over frames ``t``, delayed by ``shift`` frames."""
+    x = t - shift
+    return 1.0 / (1.0 + np.exp(-(x - 20.0) / 3.0)) - 1.0 / (1.0 + np.exp(-(x - 60.0) / 4.0))
+
+
+@pytest.mark.parametrize("shift", [0.0, 0.37, -0.8, 1.55, 4.2])
+def test_subframe_lag_recovers_a_fractional_delay(shift: float) -> None:
+    t = np.arange(90.0)
+    assert subframe_lag(expression(t), 0.3 * expression(t, shift), 10) == pytest.approx(
+        shift, abs=0.01
+    )
+
+
+@pytest.mark.parametrize("tau_s", [0.0025, 0.025])
+def test_a_kelvin_voigt_element_trails_its_load_by_its_time_constant(tau_s: float) -> None:
+    """eta x' + E x = f(t): for a load slow against tau = eta / E the response trails it by
+    tau (the low-pass phase delay, exact to O((omega tau)^2)); integrated exactly between the
+    fine samples of a 30 fps capture and measured at 30 fps."""
+    fps, sub = 30.0, 200
+    fine = np.arange(90 * sub) / (fps * sub)
+    load = expression(fine * fps)
+    x, decay = np.zeros_like(load), np.exp(-1.0 / (fps * sub * tau_s))
+    for i in range(1, len(fine)):  # exact for a load linear over each fine step
+        step = load[i] - load[i - 1]
+        x[i] = (
+            load[i]
+            - tau_s * step * fps * sub
+            + decay * (x[i - 1] - load[i - 1] + tau_s * step * fps * sub)
+        )
+    lag_s = subframe_lag(load[::sub], x[::sub], 10) / fps
+    assert lag_s == pytest.approx(tau_s, rel=0.05)
+
+
+def test_region_lags_per_region_and_none_where_nothing_moves() -> None:
+    t = np.arange(60.0)
+    reference = np.zeros((60, 3, 3))
+    reference[:, :2, 0] = 0.004 * expression(t)[:, None]
+    model = reference.copy()
+    model[:, 0, 0] = 0.004 * expression(t, 0.5)
+    model[:, 1, 0] = 0.004 * expression(t, 2.0)
+    lags = region_lags(model, reference, np.array([0, 1, 2]), ["a", "b", "still"], 10, 1e-3)
+    assert lags["a"] == pytest.approx(0.5, abs=0.01)
+    assert lags["b"] == pytest.approx(2.0, abs=0.01)
+    assert lags["still"] is None
+    assert 0.5 < lags["overall"] < 2.0
