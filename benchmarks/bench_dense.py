@@ -13,7 +13,14 @@ the camera sees in the neutral frame only (``visible``: the rest is filled from 
 and the RMS error of the moving skin in mm (targets: <= 0.10 relative and <= 0.5 mm RMS at
 every peak, issue #31).
 
+With ``--markerless`` every dataset is also measured rendered without painted markers
+(``<name>-markerless``, the demo's as ``data/library/demo-s0-markerless``) and tracked with
+``track.backend=markerless``, side by side with the marker run; the timing table gives the
+fraction of frames in which the tracker found a face (issue #31: >= 99 %, figures within
++0.03 of the markers').
+
 Run: .venv/bin/python benchmarks/bench_dense.py [--dataset demo] [--library] [--seed 0]
+    [--markerless]
 The upstream outputs are the pipeline's own (default config), computed first when the store
 lacks them.
 """
@@ -47,11 +54,12 @@ from physanim.tracking.recording import track_recording
 from tasks.track import TrackStageParams
 
 
-def measure(dataset_arg: str) -> tuple[float, float, int, list[list]]:
-    """Seconds per frame of the landmark tracker and of dense capture, frames, and the rows
-    of the error table (``COLUMNS``) of one dataset."""
+def measure(dataset_arg: str, sets: list[str]) -> tuple[float, float, int, float, list[list]]:
+    """Seconds per frame of the landmark tracker and of dense capture, frames, the fraction
+    of frames with a face found, and the rows of the error table (``COLUMNS``) of one
+    dataset with the ``--set`` overrides ``sets``."""
     config, _ = load_config(
-        FACE.config_model(), [FACE.default_config], dataset_overrides(dataset_arg)
+        FACE.config_model(), [FACE.default_config], dataset_overrides(dataset_arg) + sets
     )
     with rich_progress() as progress:
         inputs = stage_inputs(FACE, config, "dense", progress)
@@ -64,11 +72,12 @@ def measure(dataset_arg: str) -> tuple[float, float, int, list[list]]:
     dataset = config.dataset.path
 
     t0 = time.perf_counter()
-    track_recording(
+    found = track_recording(
         ingest.color, ingest.depth, ingest.K, float(ingest.fps), tracking, stage.lift,
         dataset / stage.template, dataset / stage.stereo_dir,
     )  # fmt: skip
     track_s = (time.perf_counter() - t0) / T
+    face_found = float((found.tracks.confidence > 0).any(axis=1).mean())
 
     params = config.section("dense", DenseParams)
     kinematic = np.asarray(align.kinematic[...], dtype=np.float64)
@@ -95,10 +104,12 @@ def measure(dataset_arg: str) -> tuple[float, float, int, list[list]]:
             regions = [None if np.isnan(x) else float(x) for x in fid.regions[0]]
             visible = None if np.isnan(seen) else float(seen)
             rows.append([dataset_arg, peak, f, name, float(fid.overall[0]), visible, *regions, rms])
-    return track_s, dense_s, T, rows
+    return track_s, dense_s, T, face_found, rows
 
 
 COLUMNS = ["dataset", "peak", "frame", "captured", "overall", "visible", *REGIONS, "rms_mm"]
+#: the tracker of a dataset rendered without markers
+MARKERLESS = ["track.backend=markerless"]
 
 
 def main() -> None:
@@ -106,15 +117,23 @@ def main() -> None:
     ap.add_argument("--dataset", default="demo", help="dataset name (data/<name>) or folder")
     ap.add_argument("--library", action="store_true", help="also every library performance")
     ap.add_argument("--seed", type=int, default=0, help="the library's noise and head seed")
+    ap.add_argument(
+        "--markerless", action="store_true", help="also without markers, tracked markerless"
+    )
     args = ap.parse_args()
-    datasets = [args.dataset]
-    if args.library:
-        names = [n for n in PERFORMANCE_NAMES if n != DEMO]
-        datasets += [f"data/library/{dataset_name(n, args.seed)}" for n in names]
+    names = [n for n in PERFORMANCE_NAMES if n != DEMO] if args.library else []
+    datasets = [(args.dataset, [])]
+    datasets += [(f"data/library/{dataset_name(n, args.seed)}", []) for n in names]
+    if args.markerless:
+        bare = [DEMO] + names if args.dataset == DEMO else names
+        datasets += [
+            (f"data/library/{dataset_name(n, args.seed, markers=False)}", MARKERLESS)
+            for n in bare
+        ]  # fmt: skip
     timing, rows = [], []
-    for d in datasets:
-        track_s, dense_s, T, table = measure(d)
-        timing.append([d, T, track_s, dense_s])
+    for d, sets in datasets:
+        track_s, dense_s, T, face_found, table = measure(d, sets)
+        timing.append([d, T, face_found, track_s, dense_s])
         rows += table
     print(f"{'dataset':28s} {'peak':12s} {'captured':15s} {'overall':>8s} {'visible':>8s} "
           + " ".join(f"{r:>9s}" for r in REGIONS))  # fmt: skip
@@ -128,7 +147,13 @@ def main() -> None:
         [
             Table(
                 "dense capture and landmark tracking, seconds per frame",
-                ["dataset", "frames", "track_s_per_frame", "dense_s_per_frame"],
+                [
+                    "dataset",
+                    "frames",
+                    "face_found_fraction",
+                    "track_s_per_frame",
+                    "dense_s_per_frame",
+                ],  # fmt: skip
                 timing,
             ),
             Table(
@@ -141,8 +166,9 @@ def main() -> None:
         ],
         **describe(__doc__, "bench_dense"),
         headline={
-            "dense_s_per_frame": max(t[3] for t in timing),
-            "track_s_per_frame": max(t[2] for t in timing),
+            "dense_s_per_frame": max(t[4] for t in timing),
+            "track_s_per_frame": max(t[3] for t in timing),
+            "face_found_min": min(t[2] for t in timing),
             "dense_worst_peak": max(r[4] for r in dense_rows),
         },
     )
