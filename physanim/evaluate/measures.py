@@ -8,12 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from physanim.evaluate.symmetry import (
-    displacement_curves,
-    lag_frames,
-    subframe_lag,
-    symmetry_cost,
-)
+from physanim.evaluate.symmetry import displacement_curves, lag_frames, symmetry_cost
 from physanim.mesh.binding import BINDERS
 
 
@@ -45,8 +40,9 @@ def landmark_measures(points: NDArray, names: Sequence[str]) -> LandmarkMeasures
     return LandmarkMeasures(cost, e_l, e_r, disp, peak, frame)
 
 
-def driven_free_lag(displacements: NDArray, driven: NDArray, free: NDArray, max_lag: int) -> int:
-    """Frames by which free nodes' mean displacement trails the driven nodes' (T, n, 3) m."""
+def driven_free_lag(displacements: NDArray, driven: NDArray, free: NDArray, max_lag: int) -> float:
+    """Frames (fractional) by which free nodes' mean displacement trails the driven nodes'
+    (T, n, 3) m."""
     mag = np.linalg.norm(displacements, axis=-1)
     return lag_frames(mag[:, driven].mean(axis=1), mag[:, free].mean(axis=1), max_lag)
 
@@ -62,7 +58,7 @@ def region_lags(
     """Lag (frames, fractional; > 0 when the model trails) of the ``model``'s motion behind
     the ``reference``'s, both (T, N, 3) m displacements of the same N points, overall and per
     region (``labels`` (N,) indices into ``names``): of each set's mean displacement magnitude
-    per frame (:func:`~physanim.evaluate.symmetry.subframe_lag`). None where the reference
+    per frame (:func:`~physanim.evaluate.symmetry.lag_frames`). None where the reference
     curve's range stays below a quarter of ``min_motion_m`` (a region that does not move has
     no timing; a region's mean moves less than its moving points)."""
     mag_model = np.linalg.norm(model, axis=-1)
@@ -76,7 +72,7 @@ def region_lags(
             continue
         ref, follower = mag_ref[:, members].mean(axis=1), mag_model[:, members].mean(axis=1)
         moves = ref.max() - ref.min() >= 0.25 * min_motion_m
-        out[name] = subframe_lag(ref, follower, max_lag) if moves else None
+        out[name] = lag_frames(ref, follower, max_lag) if moves else None
     return out
 
 

@@ -44,27 +44,9 @@ def displacement_curves(points: NDArray[np.floating]) -> NDArray:
     return np.linalg.norm(points - points[:1], axis=-1)
 
 
-def lag_frames(driver: NDArray[np.floating], follower: NDArray[np.floating], max_lag: int) -> int:
-    """Lag (frames, >= 0 when ``follower`` trails ``driver``) maximising their correlation.
-
-    driver, follower: (T,) curves, e.g. mean displacement of driven and of free skin nodes;
-    lags beyond T - 1 frames are not searched.
-    """
-    a = driver - driver.mean()
-    b = follower - follower.mean()
-    n = len(a)
-    max_lag = min(max_lag, n - 1)
-    lags = np.arange(-max_lag, max_lag + 1)
-    scores = [
-        float(np.dot(a[max(0, -k) : n - max(0, k)], b[max(0, k) : n - max(0, -k)])) for k in lags
-    ]
-    return int(lags[int(np.argmax(scores))])
-
-
-def subframe_lag(
-    driver: NDArray[np.floating], follower: NDArray[np.floating], max_lag: int
-) -> float:
-    """Lag (frames, fractional; > 0 when ``follower`` trails ``driver``), both (T,) curves.
+def lag_frames(driver: NDArray[np.floating], follower: NDArray[np.floating], max_lag: int) -> float:
+    """Lag (frames, fractional; > 0 when ``follower`` trails ``driver``), both (T,) curves
+    (e.g. the mean displacement of driven and of free skin nodes).
 
     The shift s in [-max_lag, max_lag] (clamped to T - 1) whose ``driver(t - s)`` (a cubic
     spline through the frames) correlates best (Pearson) with ``follower(t)``: first the best
