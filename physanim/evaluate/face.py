@@ -208,7 +208,8 @@ def evaluate_face(
     }
     fields: dict[str, Any] = {}
     if truth is not None:
-        found, figures = _against_truth(run, truth, params, scan_idx, fem_scan, labels)
+        sample = (scan_idx, labels, fem_moved, captured)
+        found, figures = _against_truth(run, truth, params, fem_scan, sample)
         fields.update(found)
         summary.update(figures)
     evaluation = FaceEvaluation(
@@ -255,14 +256,14 @@ def _against_truth(
     run: FaceRun,
     truth: Truth,
     params: EvaluateParams,
-    scan_idx: NDArray,
     fem_scan: NDArray,
-    labels: NDArray,
+    sample: tuple[NDArray, NDArray, NDArray, NDArray],
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Motion fidelity per frame and region, the lip gap, the surface distance and the
-    surface quality of the FEM skin and the kinematic scan against the truth, on the scan
-    vertices ``scan_idx`` (S,) with region ``labels`` (S,); ``fem_scan`` (T, N, 3) m the scan
-    moved by the FEM: (output fields, summary entries)."""
+    surface quality of the FEM skin and the kinematic scan against the truth; ``fem_scan``
+    (T, N, 3) m the scan moved by the FEM; ``sample`` the scan vertices the figures use
+    (S,), their regions (S,) and their displacements (T, S, 3) m by the FEM and by the
+    capture: (output fields, summary entries)."""
     from physanim.evaluate.fidelity import (
         REGIONS,
         follow_truth,
@@ -273,6 +274,7 @@ def _against_truth(
     from physanim.evaluate.measures import surface_errors
 
     disp, mouth = run.displacements, run.mouth
+    scan_idx, labels, fem_moved, captured = sample
     scan_v, scan_side = run.scan_vertices, run.scan_side
     lips = list(lip_midline_points(mouth, scan_v, scan_side, params.lip_offset_m))
     fem_lips = fem_scan[:, lips] - scan_v[lips]
@@ -287,12 +289,12 @@ def _against_truth(
     # against the uniform 2 mm mesh's 0.145)
     models = {  # their motion, the lip points moved, the true motion
         "fem": (
-            fem_scan[:, scan_idx] - scan_v[scan_idx],
+            fem_moved,
             scan_v[lips] + fem_lips,
             scan_truth[:, scan_idx],
         ),
         "kinematic": (
-            _rows(kin, scan_idx) - scan_v[scan_idx],
+            captured,
             _rows(kin, np.asarray(lips)),
             scan_truth[:, scan_idx],
         ),
@@ -321,7 +323,7 @@ def _against_truth(
     # the RMS point-to-surface distance (blind to sliding and to a shut mouth)
     frames = list(range(0, disp.shape[0], params.error_every_frames))
     err_fem, err_kin = surface_errors(  # the FEM skin and the capture on the same scan sample
-        [fem_scan[:, scan_idx], _rows(kin, scan_idx)],
+        [fem_scan[:, scan_idx], scan_v[scan_idx] + captured],
         truth.vertices,
         truth.faces,
         frames,
