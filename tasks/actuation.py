@@ -203,10 +203,12 @@ def compute(
         )  # fmt: skip
     t_drive = time.perf_counter() - t0
     report(1, 2)
-    fit, basis, t_model = inverse_step(params, tetra, conditions, observed, targets, weights)
+    landmarks = align.landmark_positions()
+    fit, basis, patch_region, t_model = inverse_step(
+        params, tetra, conditions, observed, targets, weights, landmarks
+    )
     report(2, 2)
 
-    landmarks = align.landmark_positions()
     labels = face_regions(nodes[binding.nodes], landmarks)
     n = len(binding.nodes)  # the residual on the captured scan's rows (no landmark rows)
     captured, fitted = targets[:, :n], fit.fitted[:, :n]
@@ -220,7 +222,7 @@ def compute(
         coefficients=fit.coefficients,
         centres=basis.centres,
         centre_lift=basis.lift,
-        patch_region=face_regions(basis.centres, landmarks),
+        patch_region=patch_region,
         skin_nodes=binding.nodes,
         residual=residual.overall,
         residual_regions=residual.regions,
@@ -239,11 +241,17 @@ def inverse_step(
     observed: np.ndarray,
     targets: np.ndarray,
     weights: np.ndarray,
-) -> tuple[ActuationFit, StressBasis, float]:
+    landmarks: dict[str, np.ndarray],
+) -> tuple[ActuationFit, StressBasis, np.ndarray, float]:
     """The fitted actuation (``physanim.fem.inverse.fit_actuation``) of the tetra mesh at the
     basis material under ``conditions``, moving the ``observed`` (S,) skin nodes to
-    ``targets`` (T, S, 3) m with ``weights`` (T, S); its stress basis, and the seconds spent
+    ``targets`` (T, S, 3) m with ``weights`` (T, S), each patch at the stress cost of its
+    face region (from the feature points ``landmarks``, m) and depth under the skin; its
+    stress basis, the region index (P,) of each patch (-1: none) and the seconds spent
     building the model and the basis."""
+    from scipy.spatial import cKDTree
+
+    from physanim.evaluate.fidelity import REGIONS, face_regions
     from physanim.fem.actuation import StressBasis, seam_lift
     from physanim.fem.inverse import fit_actuation
     from physanim.fem.materials import TetMaterials
@@ -257,13 +265,16 @@ def inverse_step(
     model = build_model(tetra.nodes, tetra.tets, materials, params)
     lift = seam_lift(tetra.tets, tetra.side, lip_lift(params))
     basis = StressBasis.covering(tetra.nodes, tetra.tets, fit_params.patch_spacing_m, lift)
+    patch_region = face_regions(basis.centres, landmarks)
+    depth = cKDTree(tetra.nodes[tetra.skin]).query(basis.centres)[0]
+    cost = fit_params.patch_cost([REGIONS[r] if r >= 0 else None for r in patch_region], depth)
     t_model = time.perf_counter() - t0
     fit = fit_actuation(
         model, basis, conditions, observed, targets, weights,
         fit_params.stress_cost_mm_per_kPa * 1e-6, fit_params.rate_cost_mm_per_kPa * 1e-6,
-        params.solver, fit_params.robust_mm * 1e-3,
+        params.solver, fit_params.robust_mm * 1e-3, np.asarray(cost),
     )  # fmt: skip
-    return fit, basis, t_model
+    return fit, basis, patch_region, t_model
 
 
 def lip_lift(params: ActuateParams) -> float:
@@ -334,7 +345,7 @@ def _summary(
 SPEC = StageSpec.typed(
     "actuate",
     compute,
-    version="2",
+    version="3",
     doc="inverse step: per-frame active stress with which the FEM at a fixed basis material "
     "reproduces the captured skin motion (simulate's jaw, model and actuation settings)",
     section="simulate",

@@ -3,8 +3,10 @@ and of the inverse step that fits its actuation (``actuate``, ``simulate.actuati
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from physanim.mesh.params import UNIFORM, TissueMaterial
@@ -12,6 +14,21 @@ from physanim.mesh.params import UNIFORM, TissueMaterial
 #: facial regions of the fidelity report (``physanim.evaluate.fidelity.face_regions``) and of
 #: exaggeration gestures (``DriveParams.actuation_scale``, with 'face' for the whole face)
 FACE_REGIONS: tuple[str, ...] = ("mouth", "jaw_chin", "cheeks", "nose", "forehead")
+
+
+def region_values(
+    value: dict[str, float], extra: str, valid: Callable[[float], bool], rule: str
+) -> dict[str, float]:
+    """``value`` (face region or ``extra`` -> number) when every name is known and every
+    number ``valid``; else ValueError naming the offenders and the ``rule``."""
+    names = [*FACE_REGIONS, extra]
+    unknown = sorted(set(value) - set(names))
+    if unknown:
+        raise ValueError(f"unknown region(s) {unknown}; use names among {names}")
+    bad = {k: v for k, v in value.items() if not valid(v)}
+    if bad:
+        raise ValueError(f"{rule}, got {bad}")
+    return value
 
 
 class FitParams(BaseModel):
@@ -133,15 +150,7 @@ class DriveParams(BaseModel):
     @field_validator("actuation_scale")
     @classmethod
     def _known_scales(cls, value: dict[str, float]) -> dict[str, float]:
-        unknown = sorted(set(value) - {*FACE_REGIONS, "face"})
-        if unknown:
-            raise ValueError(
-                f"unknown region(s) {unknown}; use names among {[*FACE_REGIONS, 'face']}"
-            )
-        negative = {k: v for k, v in value.items() if not v >= 0.0}
-        if negative:
-            raise ValueError(f"factors must be >= 0, got {negative}")
-        return value
+        return region_values(value, "face", lambda v: v >= 0.0, "factors must be >= 0")
 
     def scale_of(self, region: str | None) -> float:
         """The gesture factor of a patch in ``region`` (None: in none of them)."""
@@ -170,7 +179,7 @@ class ActuationParams(BaseModel):
         "centre, m; each patch reaches twice as far (5 deviatoric stress coefficients a patch)",
     )
     stress_cost_mm_per_kPa: float = Field(
-        0.0015,
+        0.0003,
         gt=0.0,
         le=10.0,
         description="regularisation: an RMS active stress of 1 kPa over the tissue costs as "
@@ -183,6 +192,22 @@ class ActuationParams(BaseModel):
         description="Huber scale of each skin node's misfit, mm: beyond it the misfit counts "
         "linearly, not squared, so motion the skull and jaw conditions contradict does not call "
         "for extreme stresses (0: plain least squares)",
+    )
+    region_stress_cost_mm_per_kPa: dict[str, float] = Field(
+        default_factory=lambda: {"mouth": 0.0015, "deep": 0.0015},
+        description="the stress cost of the patches centred in a face region "
+        f"({', '.join(FACE_REGIONS)}) or in the 'deep' tissue (farther than deep_below_m "
+        "under the skin, where no facial muscle lies), mm/kPa, in place of "
+        "stress_cost_mm_per_kPa (the larger where both apply; the rate cost stays the same). "
+        "Default: the lips (whose tets the jaw drop stretches most) and the deep tissue (the "
+        "skin barely constrains it; thin tets at the bone there) five times stiffer",
+    )
+    deep_below_m: float = Field(
+        0.010,
+        gt=0.0,
+        le=0.1,
+        description="a patch centred farther than this under the skin (from its nearest skin "
+        "node), m, is in the 'deep' tissue of region_stress_cost_mm_per_kPa",
     )
     rate_cost_mm_per_kPa: float = Field(
         0.003,
@@ -216,3 +241,21 @@ class ActuationParams(BaseModel):
         "where the capture sees them worst (demo, 0.25: lip gap at the jaw drop 11.9 -> "
         "12.4 mm against the actor's 13.9, the smile's error 0.124 -> 0.128)",
     )
+
+    @field_validator("region_stress_cost_mm_per_kPa")
+    @classmethod
+    def _known_costs(cls, value: dict[str, float]) -> dict[str, float]:
+        return region_values(
+            value, "deep", lambda v: 0.0 < v <= 10.0, "costs must be in (0, 10] mm/kPa"
+        )
+
+    def patch_cost(self, regions: list[str | None], depths: list[float]) -> list[float]:
+        """Each patch's cost factor (P,) against ``stress_cost_mm_per_kPa``, from the face
+        regions (P,) of the patch centres (None: in none) and their ``depths`` (P,) m under
+        the skin: a region's own cost, or the deep tissue's where that is larger."""
+        own, base = self.region_stress_cost_mm_per_kPa, self.stress_cost_mm_per_kPa
+        costs = [own.get(r, base) if r else base for r in regions]
+        if "deep" in own:
+            deep = np.asarray(depths) > self.deep_below_m
+            costs = [max(c, own["deep"]) if d else c for c, d in zip(costs, deep, strict=True)]
+        return [c / base for c in costs]

@@ -12,9 +12,10 @@ skin) at targets y(t) (T, S, 3) m and weights w(t) (T, S) (skin area x capture c
 the coefficients of all frames minimise
 
     sum_t [ sum_i w_ti |(p + R a)_ti - y_ti|^2 / sum_i w_ti
-            + lambda sum_p v_p |a_tp|^2 + mu sum_p v_p |a_tp - a_(t-1)p|^2 ],
+            + lambda sum_p c_p^2 v_p |a_tp|^2 + mu sum_p v_p |a_tp - a_(t-1)p|^2 ],
 
-v_p each patch's share of the tissue volume: the first term is the weighted mean square
+v_p each patch's share of the tissue volume, c_p its stress cost factor (1 by default; a
+region held to stiffer stresses, > 1): the first term is the weighted mean square
 misfit (m^2), the others the mean square active stress over the tissue and its mean square
 change per frame (Pa^2), with lambda = ``stress_cost``^2 and mu = ``rate_cost``^2 (m/Pa: an
 RMS stress of 1 Pa costs as much as an RMS misfit of ``stress_cost`` m). Small norm keeps
@@ -24,9 +25,9 @@ space, the difference penalty smooth in time.
 Cost: one factorisation of K_uu, 5 P + T solves (multi right-hand side), then the normal
 equations, coupled over frames by the difference penalty, by conjugate gradients
 preconditioned with their exact solution for the frame-mean weights: with
-v^-1/2 H v^-1/2 = Q Lambda Q^T (H = R^T W R) and the first-difference Laplacian L = P Gamma
-P^T the system is diagonal, (Lambda_i + lambda + mu Gamma_j). When the weights do not change
-over frames that is the solution (no iteration).
+v^-1/2 (H + lambda U) v^-1/2 = Q Lambda Q^T (H = R^T W R, U = diag(c^2 v)) and the
+first-difference Laplacian L = P Gamma P^T the system is diagonal, (Lambda_i + mu Gamma_j).
+When the weights do not change over frames that is the solution (no iteration).
 """
 
 from __future__ import annotations
@@ -122,9 +123,10 @@ class LeastSquares:
     """The normal equations of the module docstring's objective for responses R (3S, n) m/Pa
     over T frames, ``volume_share`` (n,) v of each coefficient's patch, ``stress_cost`` and
     ``rate_cost`` m/Pa (``anchored``: the T frames follow one whose coefficients are held
-    at zero); preconditioned by their exact solution for the per-frame weights
-    ``mean_weights`` (S,) used in every frame (diagonal in the eigenvectors Q of
-    v^-1/2 H v^-1/2 and P of the first-difference Laplacian)."""
+    at zero); ``stress_factor`` (n,) each coefficient's stress penalty times this (default
+    1); preconditioned by their exact solution for the per-frame weights ``mean_weights``
+    (S,) used in every frame (diagonal in the eigenvectors Q of v^-1/2 (H + lambda U)
+    v^-1/2, U = diag(v ``stress_factor``), and P of the first-difference Laplacian)."""
 
     def __init__(
         self,
@@ -135,15 +137,18 @@ class LeastSquares:
         mean_weights: NDArray,
         n_frames: int,
         anchored: bool = False,
+        stress_factor: NDArray | None = None,
     ) -> None:
         self.R, self.v = R, np.asarray(volume_share, dtype=np.float64)
+        self.u = self.v if stress_factor is None else self.v * np.asarray(stress_factor)
         self.lam, self.mu = stress_cost**2, rate_cost**2
         self.lap = _difference_laplacian(n_frames, anchored)
         self.s = 1.0 / np.sqrt(self.v)
         hbar = (R * _normalised(mean_weights[None])[0][:, None]).T @ R
+        hbar[np.diag_indices_from(hbar)] += self.lam * self.u
         eig_h, self.Q = np.linalg.eigh(self.s[:, None] * hbar * self.s[None, :])
         eig_l, self.P = np.linalg.eigh(self.lap)
-        self.denom = np.maximum(eig_h, 0.0)[:, None] + self.lam + self.mu * eig_l[None, :]
+        self.denom = np.maximum(eig_h, self.lam * self.u.min())[:, None] + self.mu * eig_l[None, :]
 
     def _precondition(self, r: NDArray) -> NDArray:
         s, Q, P = self.s[:, None], self.Q, self.P
@@ -160,10 +165,10 @@ class LeastSquares:
         """The minimiser a (T, n) for targets minus passive motion ``residual_targets``
         (T, 3S) m and ``weights`` (T, S) >= 0, by conjugate gradients from ``start`` (T, n)
         (default: the preconditioned guess); and the iterations taken."""
-        R, v, w = self.R, self.v[:, None], _normalised(weights)
+        R, u, v, w = self.R, self.u[:, None], self.v[:, None], _normalised(weights)
 
         def apply(a: NDArray) -> NDArray:  # a (n, T) -> the normal equations' matrix times a
-            return R.T @ (w.T * (R @ a)) + v * (self.lam * a + self.mu * (a @ self.lap))
+            return R.T @ (w.T * (R @ a)) + self.lam * u * a + self.mu * v * (a @ self.lap)
 
         b = R.T @ (w * residual_targets).T  # (n, T)
         a = self._precondition(b) if start is None else start.T.copy()
@@ -194,6 +199,7 @@ def fit_actuation(
     rate_cost: float,
     solver: str = "auto",
     robust: float = 0.0,
+    patch_cost: NDArray | None = None,
 ) -> ActuationFit:
     """The actuation with which ``model`` (the basis material, static) under ``conditions``
     (driven and fixed nodes; no springs) moves the ``observed`` (S,) free nodes to
@@ -204,7 +210,10 @@ def fit_actuation(
     ``robust`` > 0 (m): Huber's loss instead of the square for each node's misfit e beyond
     it, by ``ROBUST_ROUNDS`` reweightings w -> w min(1, robust / e), each warm-started from
     the last: motion the conditions contradict (a node the prescribed bone drags where the
-    capture holds it) no longer calls for stresses far beyond the rest of the face's."""
+    capture holds it) no longer calls for stresses far beyond the rest of the face's.
+
+    ``patch_cost`` (P,) > 0: each patch's stress cost times this (default 1; the rate cost
+    stays), by counting its volume share ``patch_cost``^2 times in the stress penalty."""
     n_frames, n_obs = np.shape(weights)
     if conditions.springs is not None:
         raise ValueError("the inverse step takes Dirichlet conditions only, not springs")
@@ -218,6 +227,9 @@ def fit_actuation(
     R, passive, seconds = response(model, basis, conditions, observed, solver)
     t0 = time.perf_counter()
     vol = basis.patch_volumes(model.volumes)
+    factor = np.ones(basis.n_patches) if patch_cost is None else np.asarray(patch_cost, float)
+    if factor.shape != (basis.n_patches,) or not np.all(factor > 0):
+        raise ValueError(f"patch_cost must be ({basis.n_patches},) and > 0")
     share = np.repeat(vol / vol.sum(), len(DEVIATORIC))
     # frame 0 is the rest the motion is measured from: no actuation there (a = 0), the other
     # frames' coefficients are the unknowns, anchored to it by the difference penalty
@@ -228,8 +240,9 @@ def fit_actuation(
     # processes use, took 10 times as long on the demo)
     with threadpool_limits(limits=1, user_api="blas"):
         ls = LeastSquares(
-            R, share, stress_cost, rate_cost, weights.mean(axis=0), n_frames - 1, True
-        )
+            R, share, stress_cost, rate_cost, weights.mean(axis=0), n_frames - 1, True,
+            np.repeat(factor**2, len(DEVIATORIC)),
+        )  # fmt: skip
         a, iterations = ls.solve(y, weights)
         for _ in range(ROBUST_ROUNDS if robust > 0 else 0):
             misfit = np.linalg.norm((a @ R.T - y).reshape(n_frames - 1, n_obs, 3), axis=2)

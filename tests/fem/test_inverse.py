@@ -92,10 +92,12 @@ def test_the_regularisation_leaves_no_actuation_far_from_any_motion():
 
 @pytest.mark.parametrize("vary", [False, True])
 @pytest.mark.parametrize("anchored", [False, True])
-def test_the_least_squares_over_frames_solve_the_normal_equations(vary, anchored):
+@pytest.mark.parametrize("factors", [False, True])
+def test_the_least_squares_over_frames_solve_the_normal_equations(vary, anchored, factors):
     """Against the stacked normal equations solved directly: frame-mean weights make the
-    preconditioner exact (no iteration), weights that vary over frames take a few; with
-    ``anchored`` the frames follow one held at zero (its step to the first one counts)."""
+    preconditioner exact (no iteration; also with stress cost factors that vary over the
+    coefficients), weights that vary over frames take a few; with ``anchored`` the frames
+    follow one held at zero (its step to the first one counts)."""
     rng = np.random.default_rng(3)
     n_obs, n, n_frames = 12, 7, 6
     R = rng.normal(size=(3 * n_obs, n)) * 1e-6
@@ -104,8 +106,9 @@ def test_the_least_squares_over_frames_solve_the_normal_equations(vary, anchored
     v = rng.uniform(0.5, 2.0, n)
     v /= v.sum()
     lam, mu = (3e-5) ** 2, (1e-4) ** 2
-    ls = LeastSquares(R, v, 3e-5, 1e-4, w.mean(axis=0), n_frames, anchored)
-    a, iterations = ls.solve(y, w)
+    f = rng.uniform(1.0, 25.0, n) if factors else np.ones(n)
+    ls = LeastSquares(R, v, 3e-5, 1e-4, w.mean(axis=0), n_frames, anchored, f)
+    a, iterations = ls.solve(y, w, rtol=1e-12)
     assert (iterations > 0) == vary
     A = np.zeros((n_frames * n, n_frames * n))
     b = np.zeros(n_frames * n)
@@ -115,7 +118,7 @@ def test_the_least_squares_over_frames_solve_the_normal_equations(vary, anchored
     for t in range(n_frames):
         wt = np.repeat(w[t] / w[t].sum(), 3)
         block = slice(t * n, (t + 1) * n)
-        A[block, block] += R.T @ (wt[:, None] * R) + lam * np.diag(v)
+        A[block, block] += R.T @ (wt[:, None] * R) + lam * np.diag(f * v)
         b[block] = R.T @ (wt * y[t])
         for s in range(n_frames):
             A[block, s * n : (s + 1) * n] += mu * lap[t, s] * np.diag(v)
@@ -148,3 +151,37 @@ def test_the_robust_fit_does_not_chase_a_node_the_conditions_contradict():
         errors[robust > 0] = np.linalg.norm(fit.coefficients - known) / np.linalg.norm(known)
     print("relative coefficient error, least squares / Huber:", errors)
     assert errors[True] < errors[False] / 5
+
+
+def test_a_patch_cost_holds_its_patches_and_a_uniform_one_is_the_stress_cost_times_it():
+    """``patch_cost``: every patch's cost times 3 is the fit at three times the stress cost
+    (to round-off; the rate cost stays); three patches at 30 times the cost carry less than
+    half the stress they carry at the plain cost."""
+    nodes, tets, bottom, top, _ = _slab((4, 4, 2), (0.04, 0.04, 0.01))
+    mats = TetMaterials.uniform(len(tets))
+    basis = StressBasis.covering(nodes, tets, 0.018)
+    known = np.zeros((3, basis.n_patches, 5))
+    known[1:] = np.random.default_rng(7).normal(size=(2, basis.n_patches, 5)) * 2e3
+    conditions = BoundaryConditions.checked(
+        len(nodes), np.zeros(0, np.int64), np.zeros((3, 0, 3)), 10.0, bottom
+    )
+    model = build_model(nodes, tets, mats)
+    targets = _observed_motion(model, basis, conditions, known, top)
+    weights = np.ones((3, len(top)))
+    costs = (3e-9, 1e-9)
+
+    def fit(scale, patch_cost=None):
+        return fit_actuation(model, basis, conditions, top, targets, weights,
+                             scale * costs[0], costs[1], patch_cost=patch_cost)  # fmt: skip
+
+    uniform = fit(1.0, np.full(basis.n_patches, 3.0))
+    np.testing.assert_allclose(uniform.coefficients, fit(3.0).coefficients, rtol=1e-6,
+                               atol=1e-6 * np.abs(uniform.coefficients).max())  # fmt: skip
+    held = np.zeros(basis.n_patches, bool)
+    held[:3] = True
+    plain, stiff = fit(1.0), fit(1.0, np.where(held, 30.0, 1.0))
+    size = lambda f: np.linalg.norm(f.coefficients[:, held])  # noqa: E731
+    print("held patches' stress, plain / 30 times the cost:", size(plain), size(stiff))
+    assert size(stiff) < 0.5 * size(plain)
+    with pytest.raises(ValueError, match="patch_cost"):
+        fit(1.0, np.zeros(basis.n_patches))
