@@ -94,8 +94,10 @@ def compute(
     run = face_run(track, align, dense, tetra, materials, simulate)
     path = ctx.dataset_dir / params.truth
     truth = load_truth(path, run.displacements.shape[0]) if path.exists() else None
-    embeddings = FileCache(ctx.dataset.run_dir / "cache" / "embeddings", keep=4)
-    evaluation, summary = evaluate_face(run, truth, params, embeddings)
+    # the scan's embedding in the tets and what the truth gives of the capture alone: a
+    # material edit reads both back
+    cache = FileCache(ctx.dataset.run_dir / "cache" / "embeddings", keep=4)
+    evaluation, summary = evaluate_face(run, truth, params, cache)
     measures = {f.name: getattr(evaluation, f.name) for f in fields(evaluation)}
     return EvaluateOutput(**measures, summary=summary)
 

@@ -83,6 +83,9 @@ def _merge(
         dotted = f"{prefix}{k}"
         if isinstance(v, Mapping) and isinstance(base.get(k), dict):
             _merge(base[k], v, source, origins, dotted + ".")
+            # a section answers to the last source that set anything in it: a check across
+            # its fields (a section-level error) names the file or --set that changed it
+            origins[dotted] = source
         else:
             base[k] = copy.deepcopy(v)
             for o in [o for o in origins if o.startswith(dotted + ".")]:

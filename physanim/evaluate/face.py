@@ -154,7 +154,8 @@ def evaluate_face(
     run: FaceRun, truth: Truth | None, params: EvaluateParams, cache: FileCache | None = None
 ) -> tuple[FaceEvaluation, dict[str, Any]]:
     """The measures of one run and its summary (rounded figures: mm, s, ratios); ``cache``
-    keeps the scan's embedding in the tets (``physanim.mesh.embed``)."""
+    keeps the scan's embedding in the tets (``physanim.mesh.embed``) and what the truth
+    gives of the capture alone (:func:`capture_against_truth`)."""
     from physanim.evaluate.fidelity import REGIONS, face_regions
     from physanim.evaluate.measures import driven_free_lag, landmark_measures, region_lags
     from physanim.mesh.embed import embedded_displacements
@@ -209,7 +210,7 @@ def evaluate_face(
     fields: dict[str, Any] = {}
     if truth is not None:
         sample = (scan_idx, labels, fem_moved, captured)
-        found, figures = _against_truth(run, truth, params, fem_scan, sample)
+        found, figures = _against_truth(run, truth, params, fem_scan, sample, cache)
         fields.update(found)
         summary.update(figures)
     evaluation = FaceEvaluation(
@@ -258,15 +259,16 @@ def _against_truth(
     params: EvaluateParams,
     fem_scan: NDArray,
     sample: tuple[NDArray, NDArray, NDArray, NDArray],
+    cache: FileCache | None = None,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Motion fidelity per frame and region, the lip gap, the surface distance and the
     surface quality of the FEM skin and the kinematic scan against the truth; ``fem_scan``
     (T, N, 3) m the scan moved by the FEM; ``sample`` the scan vertices the figures use
     (S,), their regions (S,) and their displacements (T, S, 3) m by the FEM and by the
-    capture: (output fields, summary entries)."""
+    capture; ``cache`` keeps what does not depend on the FEM: (output fields, summary
+    entries)."""
     from physanim.evaluate.fidelity import (
         REGIONS,
-        follow_truth,
         lip_gap,
         lip_midline_points,
         motion_fidelity,
@@ -280,7 +282,8 @@ def _against_truth(
     fem_lips = fem_scan[:, lips] - scan_v[lips]
     search = params.closest_points
     # the true motion of every scan vertex: its lip points', its sample's, its silhouettes'
-    scan_truth = follow_truth(scan_v, truth.vertices, truth.faces, search).displacement
+    capture = capture_against_truth(run, truth, params, cache)
+    scan_truth = capture.scan_truth
     true_gap = lip_gap(*(scan_v[lips][None] + scan_truth[:, lips]).transpose(1, 0, 2))
     kin = run.kinematic
     # both on the same sample of scan vertices: the same points for every tet mesh (the skin
@@ -334,7 +337,7 @@ def _against_truth(
         "fem": round(float(np.sqrt(np.mean(err_fem**2))) * 1e3, 3),
         "kinematic": round(float(np.sqrt(np.mean(err_kin**2))) * 1e3, 3),
     }
-    surfaces, figures = _surfaces(run, truth, params, fem_scan, scan_v + scan_truth)
+    surfaces, figures = _surfaces(run, truth, params, fem_scan, capture)
     fields.update(surfaces)
     fields["scan_error_fem"] = _worst_distance(fem_scan - scan_v, scan_truth)
     fields["scan_error_kinematic"] = _worst_distance(
@@ -344,31 +347,94 @@ def _against_truth(
     return fields, out
 
 
-def _surfaces(
-    run: FaceRun, truth: Truth, params: EvaluateParams, fem_scan: NDArray, true_scan: NDArray
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The scan moved by the FEM (``fem_scan`` (T, N, 3) m) and by the capture against the
-    same scan moved by the truth (``true_scan`` (T, N, 3) m): silhouettes per frame and view,
-    triangle stretch outside the lip seam; the truth's own largest stretch at the peaks:
-    (output fields, summary entries)."""
-    from physanim.evaluate.surfaces import (
-        RestTriangles,
-        seam_faces,
-        silhouettes,
-        surface_quality,
-        view_cameras,
-    )
+#: what the capture-side cache holds changes with this (bump when it is computed differently)
+CAPTURE_CACHE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class CaptureAgainstTruth:
+    """What the truth gives of a run's capture alone, the same for every FEM of it:
+    ``scan_truth`` (T, N, 3) m the true motion of each scan vertex (the true surface point it
+    lies on at the first frame, followed), ``truth_masks`` (T, V, H, W) bool the silhouettes
+    of the scan moved so, and the captured scan's surface quality ``kinematic``."""
+
+    scan_truth: NDArray
+    truth_masks: NDArray
+    kinematic: SurfaceQuality
+
+
+def _cameras(run: FaceRun, params: EvaluateParams) -> list:
+    from physanim.evaluate.surfaces import view_cameras
+
+    return view_cameras(run.scan_vertices, params.silhouette_size_px, params.silhouette_views_deg)
+
+
+def _away_from_seam(run: FaceRun) -> NDArray:
+    from physanim.evaluate.surfaces import seam_faces
+
+    return ~seam_faces(run.scan_faces, run.scan_parent)
+
+
+def capture_against_truth(
+    run: FaceRun, truth: Truth, params: EvaluateParams, cache: FileCache | None = None
+) -> CaptureAgainstTruth:
+    """:class:`CaptureAgainstTruth` of ``run``, kept in ``cache`` by the content of what it is
+    made from (the truth, the scan, the captured motion, the settings): a material edit, which
+    changes only the FEM, reads it back (2.4 s of the demo's evaluation) instead of making it
+    again."""
+    from physanim.evaluate.fidelity import follow_truth
+    from physanim.evaluate.surfaces import silhouettes, surface_quality
+    from physanim.store.file_cache import content_digest
 
     scan_v, faces = run.scan_vertices, run.scan_faces
-    size, views = params.silhouette_size_px, params.silhouette_views_deg
-    cameras = view_cameras(scan_v, size, views)
-    truth_masks = silhouettes(true_scan, faces, cameras, size)
-    away = ~seam_faces(faces, run.scan_parent)
     kinematic = np.asarray(run.kinematic, dtype=np.float64)
+    size, search = params.silhouette_size_px, params.closest_points
+    digest = content_digest(
+        "capture-against-truth", CAPTURE_CACHE_VERSION, np.asarray(truth.vertices),
+        truth.faces, scan_v, faces, run.scan_parent, kinematic, size,
+        params.silhouette_views_deg, search,
+    )  # fmt: skip
+    found = None if cache is None else cache.fetch(digest, ".npz")
+    if found is not None:
+        with np.load(found) as z:
+            quality = SurfaceQuality(z["iou"], z["stretch"], z["inverted"])
+            return CaptureAgainstTruth(z["scan_truth"], z["masks"], quality)
+    scan_truth = follow_truth(scan_v, truth.vertices, truth.faces, search).displacement
+    cameras = _cameras(run, params)
+    masks = silhouettes(scan_v + scan_truth, faces, cameras, size)
+    quality = surface_quality(kinematic, masks, faces, _away_from_seam(run), cameras, size)
+    out = CaptureAgainstTruth(scan_truth, masks, quality)
+    if cache is not None:
+        arrays = dict(
+            scan_truth=scan_truth, masks=masks, iou=quality.silhouette_iou,
+            stretch=quality.max_stretch, inverted=quality.inverted,
+        )  # fmt: skip
+        cache.put(digest, ".npz", lambda path: np.savez(path, **arrays))
+    return out
+
+
+def _surfaces(
+    run: FaceRun,
+    truth: Truth,
+    params: EvaluateParams,
+    fem_scan: NDArray,
+    capture: CaptureAgainstTruth,
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The scan moved by the FEM (``fem_scan`` (T, N, 3) m) and by the capture against the
+    same scan moved by the truth (``capture``: its silhouettes and the captured scan's
+    quality): silhouettes per frame and view, triangle stretch outside the lip seam; the
+    truth's own largest stretch at the peaks: (output fields, summary entries)."""
+    from physanim.evaluate.surfaces import RestTriangles, surface_quality
+
+    faces = run.scan_faces
+    views = params.silhouette_views_deg
     found = {
-        label: surface_quality(moved, truth_masks, faces, away, cameras, size)
-        for label, moved in (("fem", fem_scan), ("kinematic", kinematic))
-    }
+        "fem": surface_quality(
+            fem_scan, capture.truth_masks, faces, _away_from_seam(run), _cameras(run, params),
+            params.silhouette_size_px,
+        ),
+        "kinematic": capture.kinematic,
+    }  # fmt: skip
     own = RestTriangles.of(truth.vertices[0], truth.faces)  # at the peaks: 1 s per 30 frames
     stretch_truth = max(
         own.stretch(truth.vertices[f])[0].max() for f in truth.peak_frames().values()

@@ -164,3 +164,44 @@ def test_slivers_are_left_out_of_the_stretch() -> None:
     masks = silhouettes(frames, faces, cameras, (64, 64))
     q = surface_quality(frames, masks, faces, np.ones(3, bool), cameras, (64, 64))
     np.testing.assert_allclose(q.max_stretch, 1.0)
+
+
+def test_the_capture_side_of_the_truth_is_made_once_and_read_back(tmp_path, monkeypatch) -> None:
+    """``capture_against_truth``: on a disc of scan that lies on a truth sheet sliding 2 mm
+    up, each scan vertex's true motion is the slide, the captured scan that moves with it
+    keeps the truth's silhouettes (IoU 1); a second call (a material edit: the same capture
+    and truth) reads the cache without following the truth again, to the bit; another capture
+    is made anew."""
+    from types import SimpleNamespace
+
+    import physanim.evaluate.fidelity as fidelity
+    from physanim.evaluate.face import EvaluateParams, capture_against_truth
+    from physanim.evaluate.truth import Truth
+    from physanim.store.file_cache import FileCache
+
+    disc = lambda x, y: (x - 10) ** 2 + (y - 10) ** 2 < 64  # noqa: E731
+    scan_v, scan_f = grid_mesh(disc, (20.0, 20.0))
+    sheet_v, sheet_f = grid_mesh(lambda x, y: x == x, (20.0, 20.0), step_mm=1.0)
+    slide = np.array([0.0, 0.002, 0.0]) * np.arange(3)[:, None, None]  # (3, 1, 3) m
+    truth = Truth(sheet_v[None] + slide, sheet_f, None, [])
+    run = SimpleNamespace(
+        scan_vertices=scan_v, scan_faces=scan_f, scan_parent=np.arange(len(scan_v)),
+        kinematic=scan_v[None] + slide,
+    )  # fmt: skip
+    params, cache = EvaluateParams(), FileCache(tmp_path / "cache")
+    made = capture_against_truth(run, truth, params, cache)
+    np.testing.assert_allclose(made.scan_truth, np.broadcast_to(slide, (3, len(scan_v), 3)),
+                               atol=1e-9)  # fmt: skip
+    assert np.all(made.kinematic.silhouette_iou == 1.0) and made.truth_masks.any()
+
+    def never(*args, **kwargs):
+        raise AssertionError("the truth was followed again")
+
+    monkeypatch.setattr(fidelity, "follow_truth", never)
+    again = capture_against_truth(run, truth, params, cache)
+    for a, b in ((made.scan_truth, again.scan_truth), (made.truth_masks, again.truth_masks),
+                 (made.kinematic.max_stretch, again.kinematic.max_stretch)):  # fmt: skip
+        np.testing.assert_array_equal(a, b)
+    other = SimpleNamespace(**{**vars(run), "kinematic": run.kinematic * 1.01})
+    with pytest.raises(AssertionError, match="followed again"):
+        capture_against_truth(other, truth, params, cache)
