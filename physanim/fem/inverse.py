@@ -22,7 +22,8 @@ RMS stress of 1 Pa costs as much as an RMS misfit of ``stress_cost`` m). Small n
 patches that move no observed node at zero; the smooth patches make the stress smooth in
 space, the difference penalty smooth in time.
 
-Cost: one factorisation of K_uu, 5 P + T solves (multi right-hand side), then the normal
+Cost: one factorisation of K_uu, 5 P + r solves (multi right-hand side; r the rank of the
+prescribed motion over the frames, 2 for a mandible turning about one axis), then the normal
 equations, coupled over frames by the difference penalty, by conjugate gradients
 preconditioned with their exact solution for the frame-mean weights: with
 v^-1/2 (H + lambda U) v^-1/2 = Q Lambda Q^T (H = R^T W R, U = diag(c^2 v)) and the
@@ -96,13 +97,19 @@ def response(
     t_fac = time.perf_counter() - t0
     t0 = time.perf_counter()
     d_c = conditions.prescribed(conditions.frame_dt * np.arange(conditions.n_frames))[0]
+    # the prescribed motion of all frames spans few shapes (a mandible turning about one
+    # axis: two): d_c = C V, so the passive responses need a solve per shape, not per frame
+    u, sv, vt = np.linalg.svd(d_c, full_matrices=False)
+    rank = int(np.count_nonzero(sv > sv[0] * 1e-12)) if sv.size and sv[0] > 0 else 0
     forces = basis.force_matrix(model_force_operator(model))[free]
-    rhs = sp.hstack([forces, sp.csc_matrix(-(rows[:, pres] @ d_c.T))], format="csc")
+    shapes = -(rows[:, pres] @ vt[:rank].T)
+    rhs = sp.hstack([forces, sp.csc_matrix(shapes)], format="csc")
     out = np.empty((len(at), rhs.shape[1]))
     for j in range(0, rhs.shape[1], SOLVE_BLOCK):
         out[:, j : j + SOLVE_BLOCK] = solve(rhs[:, j : j + SOLVE_BLOCK].toarray())[at]
+    passive = (u[:, :rank] * sv[:rank]) @ out[:, basis.size :].T
     seconds = {"factorization": t_fac, "solves": time.perf_counter() - t0}
-    return out[:, : basis.size], out[:, basis.size :].T, seconds
+    return out[:, : basis.size], passive, seconds
 
 
 def _difference_laplacian(n: int, anchored: bool = False) -> NDArray:
