@@ -155,7 +155,9 @@ class LeastSquares:
         hbar[np.diag_indices_from(hbar)] += self.lam * self.u
         eig_h, self.Q = np.linalg.eigh(self.s[:, None] * hbar * self.s[None, :])
         eig_l, self.P = np.linalg.eigh(self.lap)
-        self.denom = np.maximum(eig_h, self.lam * self.u.min())[:, None] + self.mu * eig_l[None, :]
+        # its eigenvalues are at least lambda min(stress_factor): a floor against round-off
+        floor = self.lam * float((self.u / self.v).min())
+        self.denom = np.maximum(eig_h, floor)[:, None] + self.mu * eig_l[None, :]
 
     def _precondition(self, r: NDArray) -> NDArray:
         s, Q, P = self.s[:, None], self.Q, self.P
