@@ -32,7 +32,7 @@ from flows.dags import FACE
 from physanim.capture.library import DEMO, PERFORMANCE_NAMES, dataset_name
 from physanim.config import load_config
 from physanim.face.drive import skin_areas
-from physanim.face.params import DriveParams
+from physanim.face.params import ActuationParams, DriveParams
 from physanim.face.performance import landmark_motion
 from physanim.fem.boundary import BoundaryConditions
 from physanim.mesh.tetra import landmark_nodes
@@ -48,8 +48,11 @@ LEFT_OUT = 0.25
 #: on the demo's splits 0-3 (the default 0.0015: 0.74 against the spline's 0.70; 0.006-0.02:
 #: 0.65), before the library was run; the same over the whole face (no regional costs)
 LANDMARK_STRESS_COST = 0.01
-#: the regional stress costs of the default config, set to the landmark-only fit's
-REGIONAL_COSTS = ("region_stress_cost_mm_per_kPa.mouth", "region_stress_cost_mm_per_kPa.deep")
+#: the regional stress costs of the default config, each set to the landmark-only fit's
+REGIONAL_COSTS = tuple(
+    f"region_stress_cost_mm_per_kPa.{region}"
+    for region in ActuationParams().region_stress_cost_mm_per_kPa
+)
 
 
 def relative_and_rms(predicted: np.ndarray, actual: np.ndarray) -> tuple[float, float]:

@@ -100,13 +100,14 @@ class ActuateOutput(StageOutput):
     def actuation(self, tetra: TetraOutput, drive: DriveParams) -> Actuation:
         """The actuation over tetra's mesh with each patch's coefficients times its region's
         ``drive.actuation_scale``."""
+        from physanim.evaluate.fidelity import region_names
         from physanim.fem.actuation import Actuation, StressBasis, seam_lift
 
         lift = seam_lift(tetra.tets, tetra.side, self.lip_lift_m)
         basis = StressBasis.patches(
             tetra.nodes, tetra.tets, self.centres, self.radius_m, lift, self.centre_lift
         )
-        names = [self.regions[r] if r >= 0 else None for r in self.patch_region]
+        names = region_names(self.patch_region, self.regions)
         factors = np.array([drive.scale_of(n) for n in names])
         return Actuation(basis, self.coefficients).scaled(factors)
 
@@ -251,7 +252,7 @@ def inverse_step(
     building the model and the basis."""
     from scipy.spatial import cKDTree
 
-    from physanim.evaluate.fidelity import REGIONS, face_regions
+    from physanim.evaluate.fidelity import face_regions, region_names
     from physanim.fem.actuation import StressBasis, seam_lift
     from physanim.fem.inverse import fit_actuation
     from physanim.fem.materials import TetMaterials
@@ -267,7 +268,7 @@ def inverse_step(
     basis = StressBasis.covering(tetra.nodes, tetra.tets, fit_params.patch_spacing_m, lift)
     patch_region = face_regions(basis.centres, landmarks)
     depth = cKDTree(tetra.nodes[tetra.skin]).query(basis.centres)[0]
-    cost = fit_params.patch_cost([REGIONS[r] if r >= 0 else None for r in patch_region], depth)
+    cost = fit_params.patch_cost(region_names(patch_region), depth)
     t_model = time.perf_counter() - t0
     fit = fit_actuation(
         model, basis, conditions, observed, targets, weights,

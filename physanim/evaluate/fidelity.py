@@ -14,7 +14,7 @@ point-to-surface distance, it sees sliding and a mouth that stays shut.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,6 +106,12 @@ def face_regions(points: NDArray, landmarks: Mapping[str, NDArray]) -> NDArray:
         label[mask] = REGIONS.index(name)
     label[mouth] = REGIONS.index("mouth")
     return label
+
+
+def region_names(labels: NDArray, names: Sequence[str] = REGIONS) -> list[str | None]:
+    """The region name of each index of ``labels`` (N,) into ``names`` (as
+    :func:`face_regions` gives them); None for -1 (no region)."""
+    return [names[r] if r >= 0 else None for r in labels]
 
 
 @dataclass(frozen=True)
