@@ -24,7 +24,11 @@ from distributed import Client
 from prefect import Task, flow, task
 from prefect.cache_policies import NONE
 from prefect.futures import PrefectFuture
-from prefect.settings import PREFECT_API_URL, temporary_settings
+from prefect.settings import (
+    PREFECT_API_URL,
+    PREFECT_FLOWS_HEARTBEAT_FREQUENCY,
+    temporary_settings,
+)
 from prefect_dask import DaskTaskRunner
 from pydantic import BaseModel
 
@@ -107,7 +111,12 @@ class PrefectExecutor(Executor):
         if self.home is None:
             yield str(PREFECT_API_URL.value() or "")
             return
-        with shared_server(self.home) as (url, _), temporary_settings({PREFECT_API_URL: url}):
+        # no flow-run heartbeats: the command that runs the flow reports its end itself, and
+        # stopping the heartbeat thread cost every run up to a second (it sleeps in 1 s steps)
+        with (
+            shared_server(self.home) as (url, _),
+            temporary_settings({PREFECT_API_URL: url, PREFECT_FLOWS_HEARTBEAT_FREQUENCY: None}),
+        ):
             yield url  # the flow's settings, handed to every task (on Dask workers too)
 
     def task_runner(self, api_url: str) -> DaskTaskRunner | None:

@@ -1,5 +1,6 @@
 """Stage ``evaluate``: symmetry cost, mouth-corner curves, lag, and how well the simulated face
-performs the capture (``physanim.evaluate.face``), against the dataset's ground truth if any.
+performs the capture (``physanim.evaluate.face``), against the dataset's ground truth if any;
+their plots (``physanim.render.plots.plot_evaluation``) in this output's files/.
 
 Version history: CHANGELOG.md.
 """
@@ -19,6 +20,14 @@ from tasks.materials import MaterialsOutput
 from tasks.simulate import SimulateOutput
 from tasks.tetra import TetraOutput
 from tasks.track import TrackOutput
+
+#: What the evaluate stage's files show (a report lists those present), path -> caption.
+FILES = {
+    "fidelity.png": "Motion fidelity against the truth, per region (0 = moves like the actor)",
+    "lip_gap.png": "Lip gap: truth, FEM, kinematic scan",
+    "symmetry.png": "Symmetry cost (tracked, kinematic, FEM)",
+    "mouth_corners.png": "Mouth-corner displacement",
+}
 
 
 @dataclass(frozen=True)
@@ -89,6 +98,7 @@ def compute(
     lip gap, surface distance and surface quality per frame."""
     from physanim.evaluate.face import evaluate_face
     from physanim.evaluate.truth import load_truth
+    from physanim.render.plots import plot_evaluation
     from physanim.store.file_cache import FileCache
 
     run = face_run(track, align, dense, tetra, materials, simulate)
@@ -98,6 +108,7 @@ def compute(
     # material edit reads both back
     cache = FileCache(ctx.dataset.run_dir / "cache" / "embeddings", keep=4)
     evaluation, summary = evaluate_face(run, truth, params, cache)
+    plot_evaluation(simulate.times, evaluation, ctx.files_dir)
     measures = {f.name: getattr(evaluation, f.name) for f in fields(evaluation)}
     return EvaluateOutput(**measures, summary=summary)
 
@@ -105,9 +116,10 @@ def compute(
 SPEC = StageSpec.typed(
     "evaluate",
     compute,
-    version="15",
+    version="16",
     doc="symmetry cost, mouth corners, lags (free behind driven, FEM behind capture per "
     "region), philtrum peaks; with truth: motion fidelity per "
     "region, lip gap, surface distance, silhouettes and triangle stretch of the moved scan",
     fingerprint=fingerprint,
+    files=FILES,
 )

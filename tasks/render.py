@@ -1,24 +1,25 @@
 """Stage ``render``: side-by-side video of capture | model fit | captured scan | FEM | the
-scan and the FEM from the side, plots.
+scan and the FEM from the side, the simulation's plots.
 
 Per frame: the captured colour frame with the tracked landmarks, the CANDIDE-style fit, the
 captured scan and the FEM skin coloured by displacement from the front, then the captured
 scan and the FEM skin from the side (``side_view_deg``), in one panel
-(``physanim.render.face_panel``); PNG frames, an MP4 at the capture frame rate and matplotlib
-plots (``physanim.render.plots.plot_face_run``), all in this output's files/. The cropped
-capture, the fit and the captured-scan tiles come from the ``tiles`` stage. Version history:
-CHANGELOG.md.
+(``physanim.render.face_panel``); PNG frames, an MP4 at the capture frame rate and the FEM's
+energy and jaw plots (``physanim.render.plots.plot_simulation``), all in this output's files/.
+The cropped capture, the fit and the captured-scan tiles come from the ``tiles`` stage; the
+peak frames kept as PNGs from the ground truth. It does not wait for ``evaluate`` (which draws
+the evaluation's plots): the two run side by side. Version history: CHANGELOG.md.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
-from physanim.pipeline import StageContext, StageOutput, StageSpec
+from physanim.pipeline import DatasetParams, StageContext, StageOutput, StageSpec
 from physanim.render.face_panel import PanelParams
 from tasks.align import AlignOutput
-from tasks.evaluate import EvaluateOutput
 from tasks.simulate import SimulateOutput
 from tasks.tetra import TetraOutput
 from tasks.tiles import TilesOutput
@@ -27,11 +28,7 @@ from tasks.track import TrackOutput
 #: What the render stage's files show (a report lists those present), path -> caption.
 FILES = {
     "panel.mp4": "Capture | fit | captured scan | FEM | captured scan and FEM from the side",
-    "fidelity.png": "Motion fidelity against the truth, per region (0 = moves like the actor)",
-    "lip_gap.png": "Lip gap: truth, FEM, kinematic scan",
     "jaw.png": "Jaw opening estimated from the tracked mandible landmarks",
-    "symmetry.png": "Symmetry cost (tracked, kinematic, FEM)",
-    "mouth_corners.png": "Mouth-corner displacement",
     "energies.png": "FEM energies",
 }
 
@@ -52,13 +49,13 @@ def compute(
     align: AlignOutput,
     tetra: TetraOutput,
     simulate: SimulateOutput,
-    evaluate: EvaluateOutput,
     tiles: TilesOutput,
     ctx: StageContext[PanelParams],
 ) -> RenderOutput:
     """panel frames + video + plots of the upstream chain."""
+    from physanim.evaluate.truth import truth_peaks
     from physanim.render.face_panel import FaceFootage, render_face_panel
-    from physanim.render.plots import plot_face_run
+    from physanim.render.plots import plot_simulation
 
     footage = FaceFootage(
         capture=tiles.capture, fps=float(track.fps),
@@ -71,11 +68,9 @@ def compute(
     energies = dict(
         kinetic=simulate.kinetic, strain=simulate.strain, dissipated=simulate.dissipated
     )
-    peaks = (evaluate.peak_frames or {}).values()
+    peaks = truth_peaks(ctx.dataset_dir / params.truth, len(simulate.times)).values()
     with ThreadPoolExecutor(1) as pool:  # the plots draw while the panel's tiles render
-        plots = pool.submit(
-            plot_face_run, simulate.times, energies, simulate.jaw, evaluate, ctx.files_dir
-        )
+        plots = pool.submit(plot_simulation, simulate.times, energies, simulate.jaw, ctx.files_dir)
         done = render_face_panel(footage, params, ctx.files_dir, embeddings, ctx.progress, peaks)
         plots.result()
     n = len(done.frames)
@@ -88,11 +83,20 @@ def compute(
     return RenderOutput(frames=n, video=done.video.name, codec=done.codec, summary=summary)
 
 
+def fingerprint(dataset: DatasetParams, params: PanelParams) -> Mapping[str, object]:
+    """The ground truth's files when its peak frames are kept as PNGs (an edited or added
+    truth renders again); nothing otherwise."""
+    from physanim.evaluate.truth import truth_fingerprint
+
+    return truth_fingerprint(dataset.path, params.truth) if params.png_frames == "peaks" else {}
+
+
 SPEC = StageSpec.typed(
     "render",
     compute,
-    version="9",
+    version="10",
     doc="panel video (capture | fit | captured scan | FEM | scan and FEM from the side), "
-    "symmetry / mouth / energy plots",
+    "energy and jaw plots",
     files=FILES,
+    fingerprint=fingerprint,
 )

@@ -32,13 +32,31 @@ class Truth:
         if self.expression is None:
             motion = np.linalg.norm(self.vertices - self.vertices[:1], axis=2).max(axis=1)
             return {"motion": int(np.argmax(motion))}
-        out: dict[str, int] = {}
-        for i, name in enumerate(self.expression_names):
-            key = "smile" if name.startswith("smile") else name
-            frame = int(np.argmax(self.expression[:, i]))
-            if key not in out or self.expression[frame, i] > self.expression[out[key], i]:
-                out[key] = frame
-        return out
+        return expression_peaks(self.expression, self.expression_names)
+
+
+def expression_peaks(expression: NDArray, names: list[str]) -> dict[str, int]:
+    """Frame of the largest value of each of the ``expression`` (T, P) curves named ``names``
+    (P,); the per-side smiles (``smile_*``) share the key ``smile``."""
+    out: dict[str, int] = {}
+    for i, name in enumerate(names):
+        key = "smile" if name.startswith("smile") else name
+        frame = int(np.argmax(expression[:, i]))
+        if key not in out or expression[frame, i] > expression[out[key], i]:
+            out[key] = frame
+    return out
+
+
+def truth_peaks(path: Path, n_frames: int) -> dict[str, int]:
+    """:meth:`Truth.peak_frames` of the first ``n_frames`` of the ground truth at ``path``
+    (its surface read only where it has no expression curves); {} where there is none."""
+    if not path.exists():
+        return {}
+    group = zarr.open_group(path, mode="r")
+    if "expression" not in group:
+        return load_truth(path, n_frames).peak_frames()
+    names = list(group.attrs.get("expression_names", []))
+    return expression_peaks(np.asarray(group["expression"][:n_frames]), names)
 
 
 def truth_fingerprint(dataset_dir: Path, name: str) -> dict[str, object]:

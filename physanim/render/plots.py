@@ -217,24 +217,26 @@ def plot_jaw(
     return _save(fig, stem)
 
 
-def plot_face_run(
-    time: np.ndarray,
-    energies: Mapping[str, np.ndarray],
-    jaw: JawMotion | None,
-    evaluation: FaceEvaluation,
-    folder: Path,
+def plot_simulation(
+    time: np.ndarray, energies: Mapping[str, np.ndarray], jaw: JawMotion | None, folder: Path
 ) -> None:
-    """The face run's plots into ``folder``: symmetry cost, mouth corners (tracked,
-    kinematic, FEM), the FEM ``energies`` (name -> (T,) J), the ``jaw`` (None: disabled) and,
-    when the ``evaluation`` has a ground truth, fidelity and lip gap; ``time`` (T,) s."""
+    """The simulation's plots into ``folder``: the FEM ``energies`` (name -> (T,) J) and the
+    ``jaw`` (None: disabled); ``time`` (T,) s."""
+    time = np.asarray(time)
+    plot_energies(time, {"fem": energies}, folder / "energies")
+    if jaw is not None:
+        plot_jaw(time, jaw.angle, jaw.residual_m, folder / "jaw")
+
+
+def plot_evaluation(time: np.ndarray, evaluation: FaceEvaluation, folder: Path) -> None:
+    """The evaluation's plots into ``folder``: symmetry cost, mouth corners (tracked,
+    kinematic, FEM) and, when the ``evaluation`` has a ground truth, fidelity and lip gap;
+    ``time`` (T,) s."""
     ev, time = evaluation, np.asarray(time)
     variants = {"tracked": ev.tracked, "kinematic": ev.kinematic, "fem": ev.fem}
     plot_symmetry_cost(time, {v: m.cost for v, m in variants.items()}, folder / "symmetry")
     corners = {v: m.displacement[:, ev.mouth_corners] for v, m in variants.items()}
     plot_mouth_corners(time, corners, folder / "mouth_corners")
-    plot_energies(time, {"fem": energies}, folder / "energies")
-    if jaw is not None:
-        plot_jaw(time, jaw.angle, jaw.residual_m, folder / "jaw")
     if ev.lip_gap_truth is not None and ev.fidelity_fem and ev.fidelity_kinematic:
         fidelity = {"fem": ev.fidelity_fem, "kinematic": ev.fidelity_kinematic}
         peaks = {k: float(time[v]) for k, v in (ev.peak_frames or {}).items()}

@@ -34,7 +34,7 @@ from physanim.capture.library import (
 from physanim.capture.params import DemoParams
 from physanim.capture.performance import AnalyticFaceField, demo_performance
 from physanim.capture.raster import project
-from physanim.evaluate.truth import Truth, load_truth
+from physanim.evaluate.truth import Truth, load_truth, truth_peaks
 from physanim.pipeline import DatasetParams, PipelineConfig
 from tasks.ingest import ensure_demo
 
@@ -347,6 +347,8 @@ def test_a_coarse_library_dataset_holds_its_performance(tmp_path: Path) -> None:
         expected = (v0 + field.displacement(v0, gt["expression"][t])).astype(np.float32)
         np.testing.assert_array_equal(verts[t], expected)
     peaks = load_truth(out / "ground_truth.zarr", 13).peak_frames()
+    assert truth_peaks(out / "ground_truth.zarr", 13) == peaks  # what render reads
+    assert truth_peaks(out / "no_truth.zarr", 13) == {}
     assert set(peaks) == {"brow_raise", "jaw_open", "frown", "lip_press", "nose_wrinkle", "smile"}
     assert peaks["brow_raise"] == peaks["jaw_open"] < peaks["frown"] == peaks["lip_press"]
     assert peaks["lip_press"] < peaks["nose_wrinkle"] == peaks["smile"]
