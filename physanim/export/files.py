@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -12,7 +11,7 @@ import numpy as np
 
 from physanim.export.animation import MeshAnimation
 from physanim.export.params import ExportParams
-from physanim.store.file_cache import FileCache, content_digest
+from physanim.store.file_cache import FileCache, content_digest, share
 
 #: The modules whose code makes the files: an edit of any of them makes them anew.
 _WRITERS = ("files.py", "animation.py", "usd.py", "gltf.py", "alembic.py", "blender_scene.py")
@@ -87,9 +86,10 @@ def export_files(
 def cached_export_files(
     animation: MeshAnimation, folder: Path, params: ExportParams, doc: str, cache: FileCache
 ) -> ExportedFiles:
-    """:func:`export_files`, or its files copied from ``cache`` when the same animation,
+    """:func:`export_files`, or its files linked from ``cache`` when the same animation,
     settings and writers made them before (a material edit re-exports the FEM skin, not the
-    unchanged captured motion: 3-4 s of the stage on the demo)."""
+    unchanged captured motion: 3-4 s of the stage on the demo; and its variants share the
+    capture's files on disk, 55 MB each, instead of holding copies)."""
     here = Path(__file__).parent
     digest = content_digest(
         *(here.joinpath(m).read_bytes() for m in _WRITERS), animation.name, animation.points,
@@ -101,13 +101,13 @@ def cached_export_files(
     name = animation.name
     if facts is not None and all(f is not None for f in found):
         for cached, suffix in zip(found, suffixes, strict=True):
-            shutil.copyfile(cached, folder / f"{name}{suffix}")
+            share(cached, folder / f"{name}{suffix}")
         known = json.loads(facts.read_text())
         paths = [folder / f"{name}{s}" for s in suffixes]
         return ExportedFiles(paths[0], paths[1], paths[2] if params.alembic else None, **known)
     made = export_files(animation, folder, params, doc)
     for path in made.paths:
-        cache.put(digest, path.suffix, lambda tmp, path=path: shutil.copyfile(path, tmp))
+        cache.put(digest, path.suffix, lambda tmp, path=path: share(path, tmp))
     known = dict(
         targets=made.targets, rms_mm=made.rms_mm, max_mm=made.max_mm,
         normal_p99_deg=made.normal_p99_deg,

@@ -65,15 +65,27 @@ class FileCache:
         return target
 
     def make(self, out: Path, digest: str, producer: Callable[[Path], Any]) -> Path:
-        """``out`` copied from the cache when ``digest`` is there, else made by
-        ``producer(out)`` and kept."""
+        """``out`` linked from the cache when ``digest`` is there (:func:`share`), else made
+        by ``producer(out)`` and kept."""
         cached = self.fetch(digest, out.suffix)
         if cached is not None:
-            shutil.copyfile(cached, out)
+            share(cached, out)
             return out
         producer(out)
-        self.put(digest, out.suffix, lambda tmp: shutil.copyfile(out, tmp))
+        self.put(digest, out.suffix, lambda tmp: share(out, tmp))
         return out
+
+
+def share(source: Path, target: Path) -> None:
+    """``target`` as a hard link to ``source`` (one file on disk: a material edit's outputs
+    share the unchanged capture's 50 MB files instead of copying them), or a copy where the
+    file system cannot link them (another device, no hard links). Both must stay read-only:
+    the cache and the store's outputs are never written in place."""
+    target.unlink(missing_ok=True)
+    try:
+        os.link(source, target)
+    except OSError:
+        shutil.copyfile(source, target)
 
 
 def _mtime(path: Path) -> float | None:

@@ -1,5 +1,6 @@
-"""The export's file cache: an unchanged animation's files are copied back, byte for byte
-with the same fidelity figures; a changed one is written anew."""
+"""The export's file cache: an unchanged animation's files come back as the same files on disk
+(hard links: a material edit's variants do not each hold a copy of the capture's), with the
+same fidelity figures; a changed one is written anew."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from physanim.store.file_cache import FileCache
 from tests.export.conftest import three_modes
 
 
-def test_an_unchanged_animation_is_copied_and_a_changed_one_written(tmp_path: Path) -> None:
+def test_an_unchanged_animation_is_shared_and_a_changed_one_written(tmp_path: Path) -> None:
     cache, params = FileCache(tmp_path / "cache"), ExportParams()
     anim = three_modes()
     first, again, moved = (tmp_path / n for n in ("first", "again", "moved"))
@@ -24,6 +25,7 @@ def test_an_unchanged_animation_is_copied_and_a_changed_one_written(tmp_path: Pa
     assert [p.name for p in copied.paths] == [p.name for p in made.paths]
     for a, b in zip(made.paths, copied.paths, strict=True):
         assert a.read_bytes() == b.read_bytes() and b.parent == again
+        assert a.samefile(b) and a.stat().st_nlink == 3  # the first, the cache's, this one
     assert (copied.targets, copied.rms_mm, copied.max_mm) == (
         made.targets,
         made.rms_mm,
