@@ -103,7 +103,7 @@ def fingerprint(dataset: DatasetParams, params: TetraParams) -> Mapping[str, Any
 SPEC = StageSpec.typed(
     "tetra",
     compute,
-    version="5",
+    version="6",
     doc="tissue volume (skin + bone-side offset), fTetWild tets (optionally finer in named "
     "regions, coarser deep), quality per region, node labels",
     fingerprint=fingerprint,

@@ -138,7 +138,7 @@ def embedded_displacements(
     embedded in a tet mesh (``nodes`` (n, 3) m, ``tets`` (M, 4)) cut along the lip seam
     ``mouth``, from the node displacements (T, n, 3) m. ``cache``: keeps the embedding by the
     content of its inputs (a material edit does not change it)."""
-    tet_side = mouth.side(np.asarray(nodes)[tets].mean(axis=1))
+    tet_side = mouth.element_side(nodes, tets)
     args = (points, point_side, nodes, tets, tet_side)
     if cache is None:
         return blend_frames(embedding_matrix(*args), displacements)

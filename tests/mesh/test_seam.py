@@ -6,6 +6,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import Delaunay
 
+from physanim.evaluate.surfaces import RestTriangles, seam_faces
 from physanim.fem.geometry import node_dofs
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
@@ -200,3 +201,32 @@ def test_tets_hinged_by_an_edge_or_a_vertex_are_dropped():
     np.testing.assert_array_equal(kept.parent, [0, 1, 2, 3, 4])
     np.testing.assert_array_equal(kept.side, side[:5])
     assert Cut(tets[:2], np.arange(5), side[:5], 0).face_connected()[1] == 0
+
+
+def test_the_tets_cut_ends_inside_the_corners_so_a_finer_surface_stays_whole() -> None:
+    """The coarse tets' cut never runs on past a mouth corner (no tet with a node there is
+    of a lip), so a finer surface cut along the same line and embedded in the tets, its lower
+    lip dropped 2 mm, stretches only along its own cut: a tet cut running past the surface's
+    stretched the surface triangle between a point of the lower lip and its uncut neighbour
+    (4.7 times at the demo's mouth corner). The corners lie inside cubes of the block, so
+    tets there straddle them."""
+    mouth = MouthLine(np.array([[-0.0125, 0.0005, 0.0], [0.0, 0.0015, 0.0], [0.0125, 0.0005, 0.0]]))
+    nodes, tets = block()
+    cut = cut_tets(nodes, tets, mouth)
+    x, t = cut.nodes(nodes), cut.elements
+    reach = x[t][..., 0]
+    x_r, x_l = mouth.corners
+    past = (reach <= x_r).any(axis=1) | (reach >= x_l).any(axis=1)
+    assert past.sum() > 100 and np.all(mouth.element_side(x, t)[past] == NONE)
+    g = np.stack(np.meshgrid(np.linspace(-0.03, 0.03, 121), np.linspace(-0.02, 0.02, 81)), -1)
+    v = np.c_[g.reshape(-1, 2), np.zeros(g.size // 2)]  # 0.5 mm triangles on the top face
+    surface = cut_surface(v, Delaunay(v[:, :2]).simplices, mouth)
+    vs, fs = surface.nodes(v), surface.elements
+    drop = np.where((cut.side == LOWER)[:, None], [0.0, -2e-3, 0.0], 0.0)
+    moved = vs + embedded_displacements(vs, surface.side, x, t, mouth, drop[None])[0]
+    stretch, turned = RestTriangles.of(vs, fs).stretch(moved)
+    off_seam = ~seam_faces(fs, surface.parent)
+    copies = np.flatnonzero(np.arange(len(vs)) >= len(v))  # a seam vertex's second copy
+    gap = np.linalg.norm(moved[copies] - moved[surface.parent[copies]], axis=1)
+    assert gap.max() > 1.5e-3  # the lips part along the surface's cut
+    assert stretch[off_seam].max() < 2.0 and not turned[off_seam].any()
