@@ -73,6 +73,7 @@ def compute(
         observed_fraction_median=round(float(np.median(observed)), 4),
         flow_error_px_median=round(float(np.nanmedian(dense.flow_error_px)), 3),
         seconds_per_frame=round(dense.seconds_per_frame, 3),
+        unfolded_vertex_frames=dense.unfolded,
     )
     if dense.registration is not None:
         summary.update(_registration_summary(dense.registration, track.head_pose[0]))
@@ -106,6 +107,6 @@ def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[s
 SPEC = StageSpec.typed(
     "dense",
     compute,
-    version="4",
+    version="5",
     doc="captured motion of every scan vertex: dense capture (flow + depth) or the kinematic scan",
 )

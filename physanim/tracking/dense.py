@@ -30,7 +30,9 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    is filled harmonically from its neighbours, an unseen one following the prior's shape
    (the seam keeps the lips apart). Observations farther than ``outlier_m`` from the
    smoothed field are dropped and the field solved again. Then a Gaussian over time
-   (``temporal_sigma_frames``).
+   (``temporal_sigma_frames``). Where the prior folds the surface over unseen vertices
+   (the kinematic scan at the inner mouth corner in a smile), those vertices follow their
+   neighbours' motion instead (:func:`unfold_unseen`).
 
 The confidence (T, N) is 1 where a vertex was observed and kept, 0 where it was filled: a
 filled vertex is marked, never silently guessed.
@@ -70,7 +72,8 @@ class DenseMotion:
     ``head_pose`` (T, 4, 4) camera <- actor, m; ``seen`` (N,) bool, seen in the neutral
     frame; ``flow_error_px`` (T,) median forward-backward flow disagreement of the seen
     vertices; ``seconds_per_frame`` wall time of the flow, lifting and filling per frame;
-    ``registration`` of the scan to the neutral depth (None when not asked for).
+    ``registration`` of the scan to the neutral depth (None when not asked for);
+    ``unfolded`` how many (frame, vertex) pairs :func:`unfold_unseen` filled anew.
     """
 
     displacement: NDArray
@@ -80,6 +83,7 @@ class DenseMotion:
     flow_error_px: NDArray
     seconds_per_frame: float
     registration: Registration | None = None
+    unfolded: int = 0
 
 
 def smooth_depth(depth: NDArray, sigma_px: float) -> NDArray:
@@ -368,9 +372,10 @@ def fill_motion(
     faces: NDArray,
     params: DenseParams,
     prior: NDArray | None = None,
-) -> tuple[NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, int]:
     """Displacement (T, N, 3) float32 m and confidence (T, N) float32 of every scan vertex
-    from the observations (step 5 of the module docstring). With a ``prior`` (T, N, 3) m
+    from the observations (step 5 of the module docstring), and how many (frame, vertex)
+    pairs :func:`unfold_unseen` filled anew. With a ``prior`` (T, N, 3) m
     (the kinematic scan's motion), the observed departure from it fills the vertices no frame
     sees, so an unseen vertex keeps the prior's motion plus its neighbours' correction: the
     smoothness term is on the departure along the edges that touch an unseen vertex and on the
@@ -410,7 +415,56 @@ def fill_motion(
         displacement = gaussian_filter1d(
             displacement, params.temporal_sigma_frames, axis=0, mode="nearest"
         )
-    return displacement.astype(np.float32), confidence
+    displacement, unfolded = unfold_unseen(displacement, vertices, faces, obs.seen, laplacian)
+    return displacement.astype(np.float32), confidence, unfolded
+
+
+def unfold_unseen(
+    displacement: NDArray,
+    vertices: NDArray,
+    faces: NDArray,
+    seen: NDArray,
+    laplacian: sp.csr_array,
+    rings: int = 4,
+) -> tuple[NDArray, int]:
+    """``displacement`` (T, N, 3) m of the scan ``vertices`` (N, 3) m / ``faces`` (F, 3)
+    with no triangle turned over (against frame 0) for want of an observation: per frame,
+    the vertices no frame sees (``seen`` (N,) False) of every turned triangle, grown by up to
+    ``rings`` rings of unseen neighbours until none is turned, take the harmonic extension
+    of the others' motion over the scan graph (``laplacian`` (N, N)) instead of the prior's
+    shape, which folded the inner mouth corner in medley-s1's smile (2 triangles). Triangles
+    of seen vertices only are measured and left alone. Also returns how many (frame,
+    vertex) pairs were filled anew."""
+    unseen = ~np.asarray(seen, dtype=bool)
+    candidates = faces[unseen[faces].any(axis=1)]
+    if not len(candidates):
+        return displacement, 0
+    rest = vertices + displacement[0]
+    rest_normal = _normals(rest, candidates)
+    neighbours = (laplacian != 0).astype(np.int8)
+    out, unfolded = displacement.copy(), 0
+    for t in range(1, len(displacement)):
+        moved = vertices + out[t]
+        turned = (_normals(moved, candidates) * rest_normal).sum(axis=1) < 0.0
+        if not turned.any():
+            continue
+        free = np.zeros(len(vertices), dtype=bool)
+        for _ in range(rings + 1):
+            free[candidates[turned].ravel()] = True
+            free &= unseen
+            out[t] = _harmonic_fill(laplacian, ~free, out[t])
+            turned = (_normals(vertices + out[t], candidates) * rest_normal).sum(axis=1) < 0.0
+            if not turned.any():
+                break
+            free |= (neighbours @ free.astype(np.int8)) > 0  # one more ring
+        unfolded += int(free.sum())
+    return out, unfolded
+
+
+def _normals(points: NDArray, faces: NDArray) -> NDArray:
+    """(F, 3) unnormalised normals of ``faces`` (F, 3) at ``points`` (N, 3)."""
+    p = points[faces]
+    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
 
 
 def dense_track(
@@ -427,11 +481,11 @@ def dense_track(
     """Dense motion of the scan: :func:`observe` then :func:`fill_motion` (arguments there)."""
     obs = observe(color, depth, K, head_pose, vertices, faces, params, progress)
     start = time.perf_counter()
-    displacement, confidence = fill_motion(obs, vertices, faces, params, prior)
+    displacement, confidence, unfolded = fill_motion(obs, vertices, faces, params, prior)
     with np.errstate(invalid="ignore"):
         flow_error = np.nanmedian(obs.flow_error_px, axis=1)
     seconds = obs.seconds + time.perf_counter() - start
     return DenseMotion(
         displacement, confidence, obs.head_pose, obs.seen, flow_error, seconds / color.shape[0],
-        obs.registration,
+        obs.registration, unfolded,
     )  # fmt: skip

@@ -151,7 +151,9 @@ def test_the_frames_unfold_what_the_prior_folds_and_fill_what_they_do_not_see():
     exactly. The fill follows the observations: off the patch no triangle is turned and the
     error is 0.024 mm median, 0.11 max (the 1 mm smoothing of the bump; smoothing the
     departure from the prior kept the fold: 801 turned, 0.67 mm); the unseen patch follows
-    the prior and its neighbours' correction, within the fold's 1.5 mm."""
+    the prior and its neighbours' correction, within the fold's 1.5 mm, except where that
+    keeps the prior's fold: there it follows its neighbours alone, and no triangle at all is
+    turned."""
     from physanim.evaluate.surfaces import RestTriangles
     from physanim.tracking.dense import DenseObservations, fill_motion
 
@@ -173,7 +175,7 @@ def test_the_frames_unfold_what_the_prior_folds_and_fill_what_they_do_not_see():
         seen, true[:, seen], np.zeros((2, int(seen.sum()))), np.tile(np.eye(4), (2, 1, 1)), 0.0
     )
     params = DenseParams(temporal_sigma_frames=0.0, smoothing_m=0.001)
-    displacement, confidence = fill_motion(obs, vertices, faces, params, prior)
+    displacement, confidence, unfolded = fill_motion(obs, vertices, faces, params, prior)
     np.testing.assert_array_equal(confidence[1], seen)
     ring = (np.abs(vertices[:, :2] - 0.015) <= 0.0041).all(axis=1)
     err = np.linalg.norm(displacement[1] - true[1], axis=1)
@@ -182,3 +184,5 @@ def test_the_frames_unfold_what_the_prior_folds_and_fill_what_they_do_not_see():
     rest = RestTriangles.of(vertices, faces[~ring[faces].any(axis=1)])
     assert RestTriangles.of(vertices, faces).stretch(vertices + prior[1])[1].mean() > 0.45
     assert not rest.stretch(vertices + displacement[1])[1].any()
+    whole = RestTriangles.of(vertices, faces).stretch(vertices + displacement[1])[1]
+    assert not whole.any() and 0 < unfolded <= unseen.sum()
