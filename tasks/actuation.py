@@ -97,10 +97,14 @@ class ActuateOutput(StageOutput):
     radius_m: float = 0.0
     lip_lift_m: float = 0.0
 
-    def actuation(self, tetra: TetraOutput, drive: DriveParams) -> Actuation:
+    def actuation(
+        self, tetra: TetraOutput, drive: DriveParams, activity: np.ndarray | None = None
+    ) -> Actuation:
         """The actuation over tetra's mesh with each patch's coefficients times its region's
-        ``drive.actuation_scale``."""
+        ``drive.actuation_scale``, in every frame or weighted by the gesture's ``activity``
+        (T,) in [0, 1] (``physanim.face.gesture``)."""
         from physanim.evaluate.fidelity import region_names
+        from physanim.face.gesture import gesture_factors
         from physanim.fem.actuation import Actuation, StressBasis, seam_lift
 
         lift = seam_lift(tetra.tets, tetra.side, self.lip_lift_m)
@@ -109,7 +113,7 @@ class ActuateOutput(StageOutput):
         )
         names = region_names(self.patch_region, self.regions)
         factors = np.array([drive.scale_of(n) for n in names])
-        return Actuation(basis, self.coefficients).scaled(factors)
+        return Actuation(basis, self.coefficients).scaled(gesture_factors(factors, activity))
 
 
 def captured_motion(dense: DenseOutput) -> tuple[np.ndarray, np.ndarray]:

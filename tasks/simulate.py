@@ -36,6 +36,7 @@ from physanim.fem.simulate import SimResult
 from physanim.pipeline import StageContext, StageOutput, StageSpec
 from tasks.actuation import ActuateOutput, stage_drive
 from tasks.align import AlignOutput
+from tasks.fit import FitOutput
 from tasks.materials import MaterialsOutput
 from tasks.tetra import TetraOutput
 from tasks.track import TrackOutput
@@ -95,6 +96,7 @@ class SimulateOutput(SimResult, StageOutput):
 
 def simulate_inputs(
     track: TrackOutput,
+    fit: FitOutput,
     align: AlignOutput,
     tetra: TetraOutput,
     materials: MaterialsOutput,
@@ -102,21 +104,28 @@ def simulate_inputs(
     params: SimulateStageParams,
 ) -> tuple[FemProblem, FaceDrive]:
     """The FEM problem of the track, align, tetra, materials and (in the 'actuation' drive)
-    actuate outputs, and the :class:`~physanim.face.drive.FaceDrive` its boundary conditions
-    came from."""
+    actuate outputs (a gesture weighted by the fit's action units, ``drive.
+    actuation_scale_with``), and the :class:`~physanim.face.drive.FaceDrive` its boundary
+    conditions came from."""
     drive = stage_drive(track, align, tetra, params.drive, params.jaw)
     problem = FemProblem.driven(
         tetra.nodes, tetra.tets, materials.materials(), drive.prescribed,
         drive.prescribed_traj, 1.0 / float(track.fps), springs=drive.springs,
     )  # fmt: skip
     if params.drive.mode == "actuation":
-        problem = problem.with_actuation(actuate.actuation(tetra, params.drive))
+        activity = None
+        if params.drive.actuation_scale_with:
+            from physanim.face.gesture import unit_activity
+
+            activity = unit_activity(fit.au, fit.au_names, params.drive.actuation_scale_with)
+        problem = problem.with_actuation(actuate.actuation(tetra, params.drive, activity))
     return problem, drive
 
 
 def compute(
     params: SimulateStageParams,
     track: TrackOutput,
+    fit: FitOutput,
     align: AlignOutput,
     tetra: TetraOutput,
     materials: MaterialsOutput,
@@ -128,7 +137,7 @@ def compute(
     from physanim.face.performance import performance_summary
     from physanim.fem.simulate import simulate_problem
 
-    problem, drive = simulate_inputs(track, align, tetra, materials, actuate, params)
+    problem, drive = simulate_inputs(track, fit, align, tetra, materials, actuate, params)
     if params.reduced.enabled:
         from physanim.fem.preview import preview
 
@@ -143,7 +152,9 @@ def compute(
         summary["actuation"] = {
             "patches": problem.actuation.basis.n_patches,
             "scale": params.drive.actuation_scale,
-        }
+            **({"scale_with": params.drive.actuation_scale_with}
+               if params.drive.actuation_scale_with else {}),
+        }  # fmt: skip
     if params.reduced.enabled:
         summary.update(
             stepping="reduced (POD preview)",

@@ -123,6 +123,13 @@ class DriveParams(BaseModel):
         "'face' times this factor (dimensionless, >= 0; a region's own factor wins over "
         "'face'), e.g. {mouth: 1.5}",
     )
+    actuation_scale_with: list[str] = Field(
+        default_factory=list,
+        description="the gesture follows these action units of the fit (its au_names, e.g. "
+        "lip_corner_puller_L): actuation_scale applies in full where the most active of them "
+        "peaks and fades to none where they rest, so a smile gesture leaves the jaw drop "
+        "alone (empty: the factors apply in every frame)",
+    )
     landmarks: list[str] | None = Field(
         None, description="driving landmarks (default: every tracked landmark but 'exclude')"
     )

@@ -218,8 +218,11 @@ class Actuation:
         return len(self.coefficients)
 
     def scaled(self, factors: NDArray) -> Actuation:
-        """The actuation with each patch's coefficients times ``factors`` (P,)."""
-        return Actuation(self.basis, self.coefficients * np.asarray(factors)[None, :, None])
+        """The actuation with each patch's coefficients times ``factors``: (P,) in every
+        frame, or (T, P) per frame."""
+        f = np.asarray(factors, dtype=np.float64)
+        per_frame = f[:, :, None] if f.ndim == 2 else f[None, :, None]
+        return Actuation(self.basis, self.coefficients * per_frame)
 
     def force(self, model: FemModel, free: NDArray, frame_dt: float) -> FrameForce:
         """Active forces f_a (N) on the ``free`` (n_u,) DOFs of ``model`` at the frames."""

@@ -180,3 +180,13 @@ def test_actuation_shapes_are_checked():
                                 np.zeros((3, 1, 3)), 0.1)  # fmt: skip
     with pytest.raises(ValueError, match="frames"):
         problem.with_actuation(Actuation(basis, np.zeros((4, 1, 5))))
+
+
+def test_scaling_by_patch_or_by_frame_and_patch():
+    nodes, tets = box_mesh((2, 2, 1), (0.02, 0.02, 0.01))
+    basis = _whole(nodes, tets)
+    c = np.arange(3 * 5, dtype=float).reshape(3, 1, 5) + 1.0
+    act = Actuation(basis, c)
+    np.testing.assert_array_equal(act.scaled(np.array([2.0])).coefficients, 2.0 * c)
+    per_frame = act.scaled(np.array([[1.0], [1.5], [0.0]])).coefficients
+    np.testing.assert_array_equal(per_frame, c * np.array([1.0, 1.5, 0.0])[:, None, None])
