@@ -68,7 +68,11 @@ def compute(
     energies = dict(
         kinetic=simulate.kinetic, strain=simulate.strain, dissipated=simulate.dissipated
     )
-    peaks = truth_peaks(ctx.dataset_dir / params.truth, len(simulate.times)).values()
+    peaks = (
+        truth_peaks(ctx.dataset_dir / params.truth, len(simulate.times)).values()
+        if params.png_frames == "peaks"
+        else ()
+    )  # the truth is read (and in the key) only where its peaks are kept
     with ThreadPoolExecutor(1) as pool:  # the plots draw while the panel's tiles render
         plots = pool.submit(plot_simulation, simulate.times, energies, simulate.jaw, ctx.files_dir)
         done = render_face_panel(footage, params, ctx.files_dir, embeddings, ctx.progress, peaks)
