@@ -109,6 +109,6 @@ def compute(
 SPEC = StageSpec.typed(
     "export",
     compute,
-    version="2",
+    version="3",
     doc="USD, glTF (morph targets) and optional Alembic files of the FEM skin and the capture",
 )

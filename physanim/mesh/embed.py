@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from physanim.mesh.kinematic import blend_frames
-from physanim.mesh.seam import NONE, MouthLine
+from physanim.mesh.seam import NONE, MouthLine, node_sides
 from physanim.store.file_cache import FileCache, content_digest
 
 #: A point at most this far outside a tet in barycentric terms (-min weight) is inside it.
@@ -39,8 +39,12 @@ def embedding_matrix(
     """(N, n) sparse W: W @ u gives the displacements of points (N, 3) m from the node
     displacements u (n, ...) of a tet mesh (nodes (n, 3) m, tets (M, 4)).
 
-    ``point_side`` (N,) and ``tet_side`` (M,): lip sides (``physanim.mesh.seam``). A point
-    inside a tet of a compatible side takes its barycentric coordinates (searched among the
+    ``point_side`` (N,) and ``tet_side`` (M,): lip sides (``physanim.mesh.seam``). A tet (or
+    boundary face) is compatible with a point of one lip when it is not of the other lip and
+    has no node of the other lip only: at the end of the cut a tet of neither lip holds nodes
+    of one, and a lower-lip scan vertex that followed an upper-lip node there dropped half as
+    far as its neighbours at the jaw drop (its triangle stretched 3.4 times). A point
+    inside a compatible tet takes its barycentric coordinates (searched among the
     ``candidates`` tets with the nearest centroids, then, for a point in none of them, among
     every tet whose centroid is close enough to contain it); a point in none moves with its
     closest point on the boundary (:func:`on_boundary`).
@@ -54,7 +58,10 @@ def embedding_matrix(
     k = min(candidates, len(tets))
     near = tree.query(p, k=k)[1].reshape(len(p), k)
     rows = np.repeat(np.arange(len(p)), k)
-    chosen, weights = _containing(p, point_side, nodes, tets, tet_side, rows, near.ravel())
+    node_side = node_sides(tets, tet_side, len(nodes))
+    chosen, weights = _containing(
+        p, point_side, tets, node_side, tet_side, rows, near.ravel(), nodes
+    )
     missed = np.flatnonzero(chosen < 0)
     if len(missed):
         # a tet contains a point only within its largest centroid-to-corner distance
@@ -62,34 +69,46 @@ def embedding_matrix(
         found = tree.query_ball_point(p[missed], reach)
         rows = np.repeat(missed, [len(f) for f in found])
         tried = np.fromiter((t for f in found for t in f), np.int64, len(rows))
-        again = _containing(p, point_side, nodes, tets, tet_side, rows, tried)
+        again = _containing(p, point_side, tets, node_side, tet_side, rows, tried, nodes)
         chosen[missed], weights[missed] = again[0][missed], again[1][missed]
     inside = np.flatnonzero(chosen >= 0)
     within = sp.csr_array(
         (weights[inside].ravel(), (np.repeat(inside, 4), tets[chosen[inside]].ravel())),
         shape=(len(p), len(nodes)),
     )
-    return within + on_boundary(p, point_side, nodes, tets, tet_side, chosen < 0)
+    return within + on_boundary(p, point_side, nodes, tets, tet_side, chosen < 0, node_side)
+
+
+def compatible(point_side: NDArray, element_side: NDArray, corner_sides: NDArray) -> NDArray:
+    """(P,) bool: may a point of lip ``point_side`` (P,) follow an element of lip
+    ``element_side`` (P,) whose nodes are of lips ``corner_sides`` (P, k)? Yes for a point of
+    neither lip; else when the element is not of the other lip and has no node of it."""
+    other = -np.asarray(point_side)[:, None]
+    return (point_side == NONE) | (
+        (element_side != other[:, 0]) & ~((corner_sides == other) & (other != NONE)).any(axis=1)
+    )
 
 
 def _containing(
     points: NDArray,
     point_side: NDArray,
-    nodes: NDArray,
     tets: NDArray,
+    node_side: NDArray,
     tet_side: NDArray,
     rows: NDArray,
     tried: NDArray,
+    nodes: NDArray,
 ) -> tuple[NDArray, NDArray]:
-    """Of the pairs (point ``rows`` (P,), tet ``tried`` (P,)): per point (N,) the tet of a
-    compatible side that contains it (-1: none of its pairs) and its barycentric
+    """Of the pairs (point ``rows`` (P,), tet ``tried`` (P,)): per point (N,) the
+    :func:`compatible` tet that contains it (-1: none of its pairs) and its barycentric
     coordinates (N, 4) there (0 where none)."""
     corners = nodes[tets[tried]]  # (P, 4, 3)
     edges = np.swapaxes(corners[:, 1:] - corners[:, :1], 1, 2)  # (P, 3, 3)
     lam = np.linalg.solve(edges, (points[rows] - corners[:, 0])[..., None])[..., 0]
     bary = np.concatenate([1.0 - lam.sum(axis=1, keepdims=True), lam], axis=1)  # (P, 4)
-    ps, ts = point_side[rows], tet_side[tried]
-    fits = (bary.min(axis=1) >= -OUTSIDE_TOLERANCE) & ((ps == NONE) | (ts == NONE) | (ps == ts))
+    fits = (bary.min(axis=1) >= -OUTSIDE_TOLERANCE) & compatible(
+        point_side[rows], tet_side[tried], node_side[tets[tried]]
+    )
     chosen = np.full(len(points), -1)
     weights = np.zeros((len(points), 4))
     chosen[rows[fits]], weights[rows[fits]] = tried[fits], bary[fits]  # any containing tet
@@ -103,10 +122,12 @@ def on_boundary(
     tets: NDArray,
     tet_side: NDArray,
     which: NDArray,
+    node_side: NDArray,
 ) -> sp.csr_array:
     """(N, n) sparse W whose rows ``which`` (N,) bool interpolate the node values at each
-    point's closest point on the boundary of the tets (among the faces of tets of a
-    compatible lip side, as :func:`embedding_matrix`); the other rows are empty."""
+    point's closest point on the boundary of the tets (among the :func:`compatible` faces:
+    their tet's lip ``tet_side`` (M,), their nodes' ``node_side`` (n,)); the other rows are
+    empty."""
     from physanim.mesh.binding import bind_points_bvh
     from physanim.mesh.kinematic import blend_matrix
     from physanim.mesh.tetra import boundary_faces_and_tets
@@ -116,7 +137,7 @@ def on_boundary(
     out = sp.csr_array((len(points), len(nodes)))
     for side in np.unique(point_side[which]):
         rows = np.flatnonzero(which & (point_side == side))
-        usable = (face_side == NONE) | (face_side == side) | (side == NONE)
+        usable = compatible(np.full(len(faces), side), face_side, node_side[faces])
         bound = blend_matrix(bind_points_bvh(points[rows], nodes, faces[usable]), faces[usable],
                              len(nodes)).tocoo()  # fmt: skip
         out = out + sp.csr_array(

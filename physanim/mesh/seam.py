@@ -190,14 +190,21 @@ def _cut(elements: NDArray, element_side: NDArray, facets: NDArray, n_nodes: int
     out = elements.copy()
     out[corner_e, corner_j] = new_ids[which.ravel()]
     parent = np.r_[np.arange(n_nodes), key_node[~first]]
-    side = np.zeros(len(parent), dtype=np.int8)
-    upper = np.zeros(len(parent), dtype=bool)
-    lower = np.zeros(len(parent), dtype=bool)
-    upper[np.unique(out[element_side == UPPER])] = True
-    lower[np.unique(out[element_side == LOWER])] = True
+    return Cut(out, parent, node_sides(out, element_side, len(parent)), int(seam.sum()))
+
+
+def node_sides(elements: NDArray, element_side: NDArray, n_nodes: int) -> NDArray:
+    """UPPER / LOWER / NONE (n_nodes,) int8: the lip of the nodes used by the elements (M, k)
+    of one lip only (``element_side`` (M,)); NONE for the others (both lips, or neither)."""
+    elements, element_side = np.asarray(elements), np.asarray(element_side)
+    upper = np.zeros(n_nodes, dtype=bool)
+    lower = np.zeros(n_nodes, dtype=bool)
+    upper[elements[element_side == UPPER].ravel()] = True
+    lower[elements[element_side == LOWER].ravel()] = True
+    side = np.zeros(n_nodes, dtype=np.int8)
     side[upper & ~lower] = UPPER
     side[lower & ~upper] = LOWER
-    return Cut(out, parent, side, int(seam.sum()))
+    return side
 
 
 def cut_tets(nodes: NDArray, tets: NDArray, mouth: MouthLine) -> Cut:
