@@ -83,9 +83,9 @@ def compatible(point_side: NDArray, element_side: NDArray, corner_sides: NDArray
     """(P,) bool: may a point of lip ``point_side`` (P,) follow an element of lip
     ``element_side`` (P,) whose nodes are of lips ``corner_sides`` (P, k)? Yes for a point of
     neither lip; else when the element is not of the other lip and has no node of it."""
-    other = -np.asarray(point_side)[:, None]
-    return (point_side == NONE) | (
-        (element_side != other[:, 0]) & ~((corner_sides == other) & (other != NONE)).any(axis=1)
+    other = -np.asarray(point_side)
+    return (other == NONE) | (
+        (element_side != other) & ~(corner_sides == other[:, None]).any(axis=1)
     )
 
 
