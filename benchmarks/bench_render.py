@@ -1,6 +1,7 @@
 """Benchmark face rendering per frame on the real face000 scan (44k vertices, 87k triangles):
-VTK in an isolated worker (default) vs VTK in-process vs the project's rasteriser (baseline;
-numba z-buffer, numpy shading),
+the project's rasteriser (default: compiled z-buffer and shader, frames over all cores; and
+on one thread) vs VTK (Mesa llvmpipe without a GPU) in an isolated worker (the reference, and
+the default before 2026-12-06) and in-process,
 and video encoding: VP9 .mp4 / VP8 .webm (browser-playable) vs mp4v (baseline, not
 playable in browsers), all in this process.
 
@@ -44,9 +45,10 @@ def main() -> None:
     frames = {}
     rows = []  # (variant, s per frame, total s), recorded at the end
     for name, kw in [
-        ("vtk, isolated worker (default)", dict(backend="vtk")),
+        ("project rasteriser (default)", dict(backend="raster")),
+        ("project rasteriser, one thread", dict(backend="raster", threads=1)),
+        ("vtk, isolated worker (reference)", dict(backend="vtk")),
         ("vtk, in-process", dict(backend="vtk", isolate=False)),
-        ("project rasteriser (baseline)", dict(backend="numpy")),
     ]:
         for label, sc in [("skin", None), ("colour map", disp)]:
             t0 = time.perf_counter()

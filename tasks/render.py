@@ -98,7 +98,7 @@ def fingerprint(dataset: DatasetParams, params: PanelParams) -> Mapping[str, obj
 SPEC = StageSpec.typed(
     "render",
     compute,
-    version="11",
+    version="12",
     doc="panel video (capture | fit | captured scan | FEM | scan and FEM from the side), "
     "energy and jaw plots",
     files=FILES,

@@ -107,7 +107,7 @@ def compute(
 SPEC = StageSpec.typed(
     "tiles",
     compute,
-    version="5",
+    version="6",
     doc="panel tiles of the capture (cropped, landmarks drawn), the model fit and the captured "
     "scan, front and side, the scan optionally coloured by its error against the truth "
     "(render's tile settings)",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 
 def directed_edges(faces: np.ndarray) -> np.ndarray:
@@ -67,15 +68,28 @@ def edge_length_graph(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_array:
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(V, 3) unit area-weighted vertex normals of a triangle mesh (zero for isolated vertices)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # 2 * area * normal
-    idx = f.ravel()  # bincount: several times faster than np.add.at
-    n = np.stack(
-        [np.bincount(idx, np.repeat(fn[:, c], 3), minlength=len(v)) for c in range(3)], axis=1
-    )
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    n = np.zeros_like(v)
+    _accumulate_face_normals(v, f, n)
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     return n / np.where(norm > 0.0, norm, 1.0)
+
+
+# compiled: the renders take every frame's normals, and the numpy form (cross products, then a
+# bincount per axis) took 17 ms for the 166k triangles of face000 against 1 ms here
+@njit(cache=True, nogil=True)
+def _accumulate_face_normals(v: np.ndarray, f: np.ndarray, n: np.ndarray) -> None:
+    """Add each triangle's (2 x area x unit normal) to its three vertices' rows of ``n``."""
+    for t in range(f.shape[0]):
+        a, b, c = f[t, 0], f[t, 1], f[t, 2]
+        ux, uy, uz = v[b, 0] - v[a, 0], v[b, 1] - v[a, 1], v[b, 2] - v[a, 2]
+        wx, wy, wz = v[c, 0] - v[a, 0], v[c, 1] - v[a, 1], v[c, 2] - v[a, 2]
+        cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        for i in (a, b, c):
+            n[i, 0] += cx
+            n[i, 1] += cy
+            n[i, 2] += cz
 
 
 def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

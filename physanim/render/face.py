@@ -1,21 +1,22 @@
 """Offscreen renders of a face surface: lit, smooth-shaded skin or a colour map with a
 labelled colour bar, seen by a fixed camera (optionally a turntable).
 
-Two backends give the same framing (same camera model, same colour mapping, same bar):
-- ``"vtk"``: pyvista/VTK offscreen (EGL or OSMesa, no display needed); Gouraud-shaded, lit by
-  VTK's light kit.  One plotter per sequence, points/normals/colours updated in place.
-- ``"numpy"``: the project's z-buffer rasteriser (``physanim.capture.raster``, compiled)
-  with Lambert + Blinn-Phong headlight shading in numpy; no OpenGL at all.
+Two backends give the same images (same camera model, colour mapping, bar and lighting; within
+one grey level of each other on face000, tested):
+- ``"raster"`` (default): the project's compiled z-buffer rasteriser and per-pixel shader
+  (:mod:`.raster_backend`), in this process, frames shared out over threads; no OpenGL.
+- ``"vtk"``: pyvista/VTK offscreen (EGL or OSMesa, no display needed), lit by VTK's light kit;
+  one plotter per sequence, points/normals/colours updated in place. Without a GPU it draws
+  through Mesa's llvmpipe, several times slower on these dense scans.
 
 Modules: :mod:`.camera` (camera model, frontal framing, turntable), :mod:`.colours` (skin,
 colour maps, colour bar), :mod:`.surface` (one renderer over both backends:
 :mod:`.vtk_backend`, :mod:`.raster_backend`), :mod:`.isolated` (VTK in a worker process).
 This module renders sequences: ``render_sequence`` from one camera, ``render_views`` from
-several (e.g. the front and the side, each frame shaded and uploaded once for all of them).
-With ``isolate=True`` (default) they render with VTK in a separate Python process; if that
-worker dies or fails, ``backend="auto"`` re-renders the sequence with the numpy backend and
-warns. ``render_surface`` and ``SurfaceRenderer`` (:mod:`.surface`) render in-process (single
-images and tests).
+several (e.g. the front and the side, each frame's normals and colours computed once for all of
+them). The VTK backend renders in a separate Python process (``isolate=True``, default: a VTK
+crash kills its process). ``render_surface`` and ``SurfaceRenderer`` (:mod:`.surface`) render
+in-process (single images and tests).
 
 Frames: actor frame (+x actor's left, +y up, +z out of the face), so the frontal camera sits
 on +z and the actor's left appears on the image's right, as in a photograph.
@@ -23,8 +24,9 @@ on +z and the actor's left appears on the image's right, as in a photograph.
 
 from __future__ import annotations
 
-import warnings
+import os
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Literal
 
 import numpy as np
@@ -34,7 +36,7 @@ from physanim.render.colours import BAR_HEIGHT, SKIN, ColourMap
 from physanim.render.isolated import render_isolated
 from physanim.render.surface import check_mesh, render_frames
 
-Backend = Literal["auto", "vtk", "numpy"]
+Backend = Literal["raster", "vtk"]
 
 
 def _frame_scalars(scalars: np.ndarray | None, n_frames: int) -> np.ndarray | None:
@@ -59,9 +61,10 @@ def render_sequence(
     azimuth_deg: np.ndarray | Sequence[float] | None = None,
     size: tuple[int, int] = (480, 640),
     colour: tuple[float, float, float] = SKIN,
-    backend: Backend = "auto",
+    backend: Backend = "raster",
     isolate: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    threads: int | None = None,
 ) -> np.ndarray:
     """Render an animated mesh: ``vertices`` (T, N, 3) m, ``faces`` (M, 3) -> (T, H, W, 3)
     uint8, ``size`` = (W, H) px.
@@ -70,13 +73,13 @@ def render_sequence(
     displacement in mm, von Mises stress in kPa), drawn with ``colour_map`` (fixed ``clim``
     so colours are comparable over frames).  ``camera`` defaults to the frontal camera of
     frame 0, shared by all frames; ``azimuth_deg`` (T,) turns it per frame (turntable).
-    ``backend``: "vtk", "numpy" or "auto" (vtk, falling back to numpy if VTK fails);
-    ``isolate`` runs VTK in a separate Python process (see the module docstring).
+    ``backend``: "raster" or "vtk"; ``isolate`` runs VTK in a separate Python process (see
+    the module docstring); ``threads`` as in :func:`render_views`.
     """
     return render_views(
         vertices, faces, (0.0,), scalars=scalars, colour_map=colour_map, camera=camera,
         azimuth_deg=azimuth_deg, size=size, colour=colour, backend=backend, isolate=isolate,
-        progress=progress,
+        progress=progress, threads=threads,
     )[0]  # fmt: skip
 
 
@@ -91,17 +94,17 @@ def render_views(
     azimuth_deg: np.ndarray | Sequence[float] | None = None,
     size: tuple[int, int] = (480, 640),
     colour: tuple[float, float, float] = SKIN,
-    backend: Backend = "auto",
+    backend: Backend = "raster",
     isolate: bool = True,
     progress: Callable[[int, int], None] | None = None,
     threads: int | None = None,
 ) -> np.ndarray:
     """An animated mesh seen from each of ``views_deg`` (V,) camera azimuths, degrees (e.g.
     0 frontal, 70 three-quarter towards the actor's left; added to the turntable's): (V, T,
-    H, W, 3) uint8, by one renderer (one worker process) that shades each frame once for all
-    its views; ``progress`` counts the V * T images; ``threads`` the worker's rasteriser
-    threads (None: one per core; fewer when several workers render at once). The other
-    arguments as in :func:`render_sequence`."""
+    H, W, 3) uint8; each frame's normals and colours are computed once for all its views;
+    ``progress`` counts the V * T images; ``threads``: the rasteriser's threads, each taking
+    a share of the frames (None: one per core; fewer when several renders run at once; with
+    VTK, Mesa's). The other arguments as in :func:`render_sequence`."""
     vertices = np.asarray(vertices, dtype=np.float64)
     if vertices.ndim != 3 or vertices.shape[2] != 3:
         raise ValueError(f"vertices must be (T, N, 3) metres, got shape {vertices.shape}")
@@ -119,14 +122,31 @@ def render_views(
         raise ValueError(f"azimuth_deg must be ({n_frames},) degrees, got shape {az.shape}")
     cameras = [[turntable(base, a + v) for a in az] for v in views_deg]
     settings = dict(size=size, colour_map=colour_map, colour=colour)
-    if backend in ("auto", "vtk") and isolate:
-        try:
-            return render_isolated(vertices, faces, per_frame, cameras, settings, progress, threads)
-        except RuntimeError as exc:
-            if backend == "vtk":
-                raise
-            warnings.warn(f"{exc}; using the numpy rasteriser", RuntimeWarning, stacklevel=2)
-            backend = "numpy"
+    if backend not in ("raster", "vtk"):
+        raise ValueError(f"backend must be 'raster' or 'vtk', got {backend!r}")
+    if backend == "vtk" and isolate:
+        return render_isolated(vertices, faces, per_frame, cameras, settings, progress, threads)
     out = np.empty((len(views_deg), n_frames, size[1], size[0], 3), dtype=np.uint8)
-    render_frames(out, vertices, faces, per_frame, cameras, settings, backend, progress)
+    workers = 1 if backend == "vtk" else min(threads or len(os.sched_getaffinity(0)), n_frames)
+    bounds = np.linspace(0, n_frames, max(workers, 1) + 1).round().astype(int)
+    shares = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    done = [0] * len(shares)
+
+    def render_share(i: int) -> None:
+        frames = shares[i]  # a view of ``out``: the share renders in place
+
+        def counted(n: int, _total: int) -> None:
+            done[i] = n
+            if progress is not None:
+                progress(sum(done), len(views_deg) * n_frames)
+
+        render_frames(
+            out[:, frames], vertices[frames],  faces,
+            None if per_frame is None else per_frame[frames],
+            [view[frames] for view in cameras], settings, backend, counted,
+        )  # fmt: skip
+
+    # the rasteriser's kernels release the GIL: the frames' shares render side by side
+    with ThreadPoolExecutor(len(shares)) as pool:
+        list(pool.map(render_share, range(len(shares))))
     return out

@@ -193,8 +193,8 @@ def motion_tiles(
 ) -> dict[str, NDArray]:
     """Title -> (R, H, W, 3) uint8 tiles of R rendered frames of the fitted motion mesh
     (``fit_motion`` (R, V, 3) m, ``fit_triangles``) and of the captured scan (``captured``
-    (R, N, 3) m on ``scan_faces``; from the front and the side, ``params.views_deg``), each
-    mesh rendered in its own worker process, by the cameras of the FEM tiles (framed on
+    (R, N, 3) m on ``scan_faces``; from the front and the side, ``params.views_deg``), the
+    two meshes rendered side by side, by the cameras of the FEM tiles (framed on
     ``scan_vertices`` (N, 3) m). ``error_mm`` (R, N): the scan's error, mm, coloured with a
     colour bar (None: plain skin)."""
     from physanim.render.face import render_views
@@ -259,29 +259,15 @@ def fem_tiles(
     )  # fmt: skip
     magnitude_mm = np.linalg.norm(disp, axis=-1) * 1e3
     top = params.displacement_max_mm or max(float(magnitude_mm.max()), 1e-3)
-    views = params.views_deg
-    done = [0] * len(views)
-
-    def view(i: int) -> NDArray:
-        def counted(n: int, _total: int) -> None:
-            done[i] = n
-            progress(sum(done), len(views) * len(frames))
-
-        return render_views(
-            scan_v[None] + disp, footage.scan_faces, (views[i],), scalars=magnitude_mm,
-            colour_map=ColourMap("displacement (mm)", clim=(0.0, top)), progress=counted,
-            camera=_camera(scan_v, params), size=params.size,
-            azimuth_deg=params.azimuth(len(frames)), threads=_share_of_cores(len(views)),
-        )  # fmt: skip
-
-    # one worker process per view, the cores shared out: 180 demo tiles on two cores in 8.7 s
-    # (one worker with both cores: 10-13 s)
-    with ThreadPoolExecutor(len(views)) as pool:
-        return np.concatenate(list(pool.map(view, range(len(views)))))
+    return render_views(
+        scan_v[None] + disp, footage.scan_faces, params.views_deg, scalars=magnitude_mm,
+        colour_map=ColourMap("displacement (mm)", clim=(0.0, top)), progress=progress,
+        camera=_camera(scan_v, params), size=params.size, azimuth_deg=params.azimuth(len(frames)),
+    )  # fmt: skip
 
 
 def _share_of_cores(workers: int) -> int:
-    """Rasteriser threads of each of ``workers`` render processes running at once."""
+    """Rasteriser threads of each of ``workers`` renders running at once."""
     return max(1, len(os.sched_getaffinity(0)) // workers)
 
 

@@ -6,10 +6,10 @@ the caller.  A segfault was reported with pymeshlab imported in the same process
 before or after pyvista, meshes loaded, several plotters), but VTK does segfault (SIGSEGV,
 no Python exception) whenever it cannot create a GL context, e.g. when it picks OSMesa and
 libOSMesa is not installed (``VTK_DEFAULT_OPENGL_WINDOW=vtkOSOpenGLRenderWindow`` here).
-``physanim.render.face.render_sequence`` with ``isolate=True`` (default) therefore renders
-in a separate Python process (``python -m physanim.render.isolated``, importing numpy,
-matplotlib, pyvista and the renderer's modules; no ``__main__`` guard needed in the caller);
-if that worker dies or fails, ``backend="auto"`` re-renders with the numpy backend and warns.
+``physanim.render.face.render_sequence`` with ``backend="vtk"`` and ``isolate=True``
+(default) therefore renders in a separate Python process (``python -m
+physanim.render.isolated``, importing numpy, matplotlib, pyvista and the renderer's modules; no
+``__main__`` guard needed in the caller), and raises RuntimeError if that worker dies or fails.
 
 Protocol: the inputs go in an .npz (arrays and a JSON ``meta``), the frames come back in a
 memory-mapped .npy, and the worker prints one ``@physanim-frame K`` line per frame rendered

@@ -1,7 +1,8 @@
 """Offscreen render of one face surface, frame after frame: lit, smooth-shaded skin or a
 colour map with its labelled colour bar, through either backend (same camera model, same
-colour mapping, same bar): ``"vtk"`` (:mod:`.vtk_backend`) or ``"numpy"``
-(:mod:`.raster_backend`). In-process; sequences: :func:`physanim.render.face.render_sequence`.
+colour mapping, same bar, same lighting): ``"raster"`` (:mod:`.raster_backend`, the project's
+own) or ``"vtk"`` (:mod:`.vtk_backend`). In-process; sequences:
+:func:`physanim.render.face.render_sequence`.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 from physanim.cameras import Camera, frontal_camera
 from physanim.mesh.topology import vertex_normals
 from physanim.render.colours import BAR_HEIGHT, SKIN, ColourMap, colour_bar
-from physanim.render.raster_backend import render_numpy
+from physanim.render.raster_backend import render_raster
 from physanim.render.vtk_backend import VtkView
 
 
@@ -56,7 +57,7 @@ class SurfaceRenderer:
         size: tuple[int, int] = (480, 640),
         colour_map: ColourMap | None = None,
         colour: tuple[float, float, float] = SKIN,
-        backend: Literal["vtk", "numpy"] = "vtk",
+        backend: Literal["raster", "vtk"] = "raster",
     ) -> None:
         self.faces = np.asarray(faces, dtype=np.int64)
         self.n_vertices = n_vertices
@@ -78,7 +79,7 @@ class SurfaceRenderer:
         self.close()
 
     def close(self) -> None:
-        """Release the VTK render window (no-op for the numpy backend)."""
+        """Release the VTK render window (no-op for the raster backend)."""
         if self._vtk is not None:
             self._vtk.close()
 
@@ -110,7 +111,7 @@ class SurfaceRenderer:
             views = self._vtk.render(vertices, normals, rgb, site, cameras)
         else:
             views = [
-                render_numpy(
+                render_raster(
                     vertices, normals, self.faces, rgb, site, c, self.view_size, self.colour
                 )
                 for c in cameras
@@ -127,7 +128,7 @@ def render_surface(
     camera: Camera | None = None,
     size: tuple[int, int] = (480, 640),
     colour: tuple[float, float, float] = SKIN,
-    backend: Literal["vtk", "numpy"] = "vtk",
+    backend: Literal["raster", "vtk"] = "raster",
 ) -> np.ndarray:
     """One (H, W, 3) uint8 image of a mesh: ``vertices`` (N, 3) m, ``faces`` (M, 3); optional
     ``scalars`` (N,) or (M,) drawn with ``colour_map`` (default: unlabelled, over the range); camera
@@ -146,9 +147,8 @@ def render_surface(
 def render_frames(out, vertices, faces, per_frame, cameras, settings, backend, progress) -> None:
     """Render frame t of ``vertices`` (T, N, 3) m (and of the ``per_frame`` scalars) seen by
     ``cameras[v][t]`` into ``out[v, t]`` ((V, T, H, W, 3) uint8) with one renderer."""
-    chosen = "vtk" if backend == "auto" else backend
     n_views, n_frames = len(cameras), len(vertices)
-    with SurfaceRenderer(faces, vertices.shape[1], **settings, backend=chosen) as renderer:
+    with SurfaceRenderer(faces, vertices.shape[1], **settings, backend=backend) as renderer:
         for t in range(n_frames):
             s = None if per_frame is None else per_frame[t]
             views = renderer.render_views(vertices[t], [c[t] for c in cameras], s)

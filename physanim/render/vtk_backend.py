@@ -11,6 +11,7 @@ import numpy as np
 
 from physanim.cameras import Camera
 from physanim.render.colours import BACKGROUND
+from physanim.render.raster_backend import AMBIENT, DIFFUSE, SPECULAR, SPECULAR_POWER
 
 
 class VtkView:
@@ -37,7 +38,7 @@ class VtkView:
         cameras: Sequence[Camera],
     ) -> list[np.ndarray]:
         """(H, W, 3) uint8 views of the mesh, one per camera (the mesh uploaded once);
-        arguments as in :func:`.raster_backend.render_numpy`."""
+        arguments as in :func:`.raster_backend.render_raster`."""
         import pyvista as pv
 
         if self._plotter is None:
@@ -49,13 +50,22 @@ class VtkView:
             plotter = pv.Plotter(off_screen=True, window_size=self.view_size)
             plotter.render_window.SetMultiSamples(0)  # MSAA is 4-5x slower on llvmpipe
             plotter.set_background(BACKGROUND)
-            style = dict(ambient=0.15, diffuse=0.85, specular=0.15, specular_power=20.0)
+            style = dict(
+                ambient=AMBIENT, diffuse=DIFFUSE, specular=SPECULAR, specular_power=SPECULAR_POWER
+            )
             if rgb is None:
-                plotter.add_mesh(mesh, color=tuple(self.colour), interpolation="gouraud", **style)
+                actor = plotter.add_mesh(
+                    mesh, color=tuple(self.colour), interpolation="gouraud", **style
+                )
             else:
                 data = mesh.point_data if site == "point" else mesh.cell_data
                 data["rgb"] = rgb
-                plotter.add_mesh(mesh, scalars="rgb", rgb=True, interpolation="gouraud", **style)
+                actor = plotter.add_mesh(
+                    mesh, scalars="rgb", rgb=True, interpolation="gouraud", **style
+                )
+            # white highlights (VTK's SetColor also tints them, by the theme's colour with
+            # scalars), as the project's own backend draws them
+            actor.prop.specular_color = (1.0, 1.0, 1.0)
             self._plotter, self._mesh = plotter, mesh
         mesh = self._mesh
         mesh.points[:] = vertices
