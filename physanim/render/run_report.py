@@ -12,6 +12,7 @@ variant (``StageSpec.label``).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -58,13 +59,14 @@ def shown_variants(store: StageStore, chain: Sequence[str]) -> list[str]:
     """Keys of the last stage of ``chain`` in the complete runs recorded in the store (run
     manifests, sweep variants included), oldest first, whose ``chain`` outputs are intact."""
     shown: list[str] = []
+    intact = cache(store.has)  # the runs share most upstream outputs: check each once
     for run in sorted(store.runs(), key=lambda r: r.name):
         key = run.keys.get(chain[-1])
         if (
             key is not None
             and run.info.get("complete")
             and key not in shown
-            and all(s in run.keys and store.has(s, run.keys[s]) for s in chain)
+            and all(s in run.keys and intact(s, run.keys[s]) for s in chain)
         ):
             shown.append(key)
     return shown
