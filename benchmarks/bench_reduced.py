@@ -9,7 +9,8 @@ that a variant without a full run would get, and its extra time. The basis (the 
 snapshots plus region sensitivities, ``simulate.reduced`` defaults) is built once and timed
 apart. Medians over ``--repeats`` runs (default 1: a full run takes 10-30 s here).
 
-Run: .venv/bin/python benchmarks/bench_reduced.py [--repeats 3]
+Run: .venv/bin/python benchmarks/bench_reduced.py [--repeats 3] [-c configs/meshes/uniform_2mm.yaml]
+(``-c``: extra config files merged under each model's, e.g. another tet size.)
 The demo's upstream stages (default config and each model's materials) are computed into
 data/demo first when the store lacks them (several minutes, once).
 """
@@ -39,9 +40,10 @@ from tasks.simulate import SimulateStageParams, simulate_inputs
 MODELS = ("uniform", "model1", "model2", "model3")
 
 
-def variant_inputs(model: str) -> tuple[FemProblem, Any, SimulateStageParams]:
-    """The FEM problem, the materials output and the stage params of one model."""
-    files = [FACE.default_config]
+def variant_inputs(model: str, extra: list[Path]) -> tuple[FemProblem, Any, SimulateStageParams]:
+    """The FEM problem, the materials output and the stage params of one model, with the
+    ``extra`` config files merged over the default."""
+    files = [FACE.default_config, *extra]
     if model != "uniform":
         files.append(Path("configs/models") / f"{model}.yaml")
     config, _ = load_config(FACE.config_model(), files, dataset_overrides("demo"))
@@ -65,12 +67,14 @@ def timed(repeats: int, fn):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("-c", "--config", type=Path, action="append", default=[],
+                        help="extra config file (repeatable), e.g. another tet size")  # fmt: skip
     opts = parser.parse_args()
-    variants = {m: variant_inputs(m) for m in MODELS}
+    variants = {m: variant_inputs(m, opts.config) for m in MODELS}
     full = {}
     for m, (problem, _, params) in variants.items():
         full[m] = timed(opts.repeats, lambda a=problem, p=params: simulate_problem(a, p))
-        print(f"full run {m}: {full[m][0]:.1f} s")
+        print(f"full run {m}: {full[m][0]:.1f} s", flush=True)
 
     problem, materials, params = variants["uniform"]
     bc = problem.conditions
@@ -108,13 +112,15 @@ def main() -> None:
         )
         rows.append([m, full[m][0], wall, full[m][0] / wall, 100 * error["peak"],
                      100 * error["rms"], 100 * estimate["peak"], t_est])  # fmt: skip
+    n_nodes = len(variants["uniform"][0].nodes)
+    mesh = f", {n_nodes} nodes" + "".join(f", {c}" for c in opts.config)
     columns = ["variant", "full_simulate_s", "preview_s", "speed_up", "error_pct_of_peak"]
     columns += ["error_rms_pct", "estimate_pct_of_peak", "estimate_s"]
     record(
         "bench_reduced",
         [
             Table(
-                f"previews against full runs (demo), medians of {opts.repeats}",
+                f"previews against full runs (demo{mesh}), medians of {opts.repeats}",
                 columns,
                 rows,
                 notes=f"basis: {basis.size} modes ({len(free)} free DOFs), energy "
