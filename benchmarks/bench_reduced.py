@@ -96,13 +96,16 @@ def main() -> None:
 
         def preview(a=problem, p=params):
             variant = build_model(a.nodes, a.tets, a.materials, p)
-            return variant, reduced.simulate_reduced(variant, bc, basis, built["substeps"])
+            run = reduced.simulate_reduced(
+                variant, bc, basis, built["substeps"], actuation=a.actuation
+            )
+            return variant, run
 
         wall, (variant, run) = timed(opts.repeats, preview)
         u = run.result.displacements
         error = reduced.displacement_error(u, full[m][1].displacements)
         t0 = time.perf_counter()
-        est = reduced.residual_estimate(variant, bc, basis, run, params.solver)
+        est = reduced.residual_estimate(variant, bc, basis, run, params.solver, problem.actuation)
         t_est = time.perf_counter() - t0
         estimate = reduced.displacement_error(u + est, u)
         print(
