@@ -184,11 +184,24 @@ class StressBasis:
         """Per-tet active stress (M, 6) Pa of coefficients (P, 5) Pa."""
         return self.weights @ (np.asarray(coefficients) @ DEVIATORIC)
 
-    def force_matrix(self, operator: sp.csr_matrix) -> sp.csc_matrix:
-        """(3N, 5P) active nodal forces, N per Pa of each coefficient (patch-major), from
-        the ``stress_force_operator`` of the mesh."""
-        phi = sp.kron(self.weights, DEVIATORIC.T, format="csr")  # (6M, 5P)
-        return (-(operator @ phi)).tocsc()
+    def force_matrix(self, model: FemModel) -> sp.csc_matrix:
+        """(3N, 5P) active nodal forces of ``model``'s mesh, N per Pa of each coefficient
+        (patch-major): column (p, k) is -sum_e w_ep V_e B_e^T DEVIATORIC[k], what
+        ``model_force_operator(model)`` makes of that stress field."""
+        # per direction k, each tet's 12 nodal forces summed over the patches' tets: a sixth
+        # of the products through the (3N, 6M) stress operator and no Kronecker product (a
+        # 2 mm demo mesh, 150k tets: 0.8 s against 2.8 s)
+        b = strain_displacement(model.grads) * model.volumes[:, None, None]  # (M, 6, 12)
+        per_tet = -np.einsum("mij,ki->kmj", b, DEVIATORIC)  # (5, M, 12)
+        m, n_dirs, p = len(model.tets), len(DEVIATORIC), self.n_patches
+        dofs, indptr = element_dofs(model.tets).ravel(), 12 * np.arange(m + 1)
+        to_patches = self.weights.T.tocsr()  # (P, M)
+        by_direction = [
+            to_patches @ sp.csr_matrix((f.ravel(), dofs, indptr), shape=(m, model.n_dofs))
+            for f in per_tet
+        ]  # each (P, 3N)
+        patch_major = (np.arange(p)[:, None] + p * np.arange(n_dirs)).ravel()
+        return sp.vstack(by_direction, format="csr")[patch_major].T  # CSC
 
     def patch_volumes(self, volumes: NDArray) -> NDArray:
         """Volume (P,) m^3 of each patch, sum_e w_ep V_e (they sum to the tissue's)."""
@@ -226,8 +239,8 @@ class Actuation:
 
     def force(self, model: FemModel, free: NDArray, frame_dt: float) -> FrameForce:
         """Active forces f_a (N) on the ``free`` (n_u,) DOFs of ``model`` at the frames."""
-        forces = self.basis.force_matrix(model_force_operator(model))[free]
-        values = (forces @ self.coefficients.reshape(self.n_frames, -1).T).T
+        forces = self.basis.force_matrix(model)  # (3N, 5P)
+        values = (forces @ self.coefficients.reshape(self.n_frames, -1).T).T[:, free]
         return FrameForce(values, free, np.arange(len(free)), frame_dt, len(free))
 
     def energy_scale(self, model: FemModel) -> float:

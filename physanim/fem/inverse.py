@@ -41,7 +41,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from physanim.fem.actuation import DEVIATORIC, StressBasis, model_force_operator
+from physanim.fem.actuation import DEVIATORIC, StressBasis
 from physanim.fem.boundary import BoundaryConditions
 from physanim.fem.geometry import node_dofs
 from physanim.fem.linsolve import factorize_many
@@ -101,7 +101,7 @@ def response(
     # axis: two): d_c = C V, so the passive responses need a solve per shape, not per frame
     u, sv, vt = np.linalg.svd(d_c, full_matrices=False)
     rank = int(np.count_nonzero(sv > sv[0] * 1e-12)) if sv.size and sv[0] > 0 else 0
-    forces = basis.force_matrix(model_force_operator(model))[free]
+    forces = basis.force_matrix(model)[free]
     shapes = -(rows[:, pres] @ vt[:rank].T)
     rhs = sp.hstack([forces, sp.csc_matrix(shapes)], format="csc")
     out = np.empty((len(at), rhs.shape[1]))
