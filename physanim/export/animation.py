@@ -9,6 +9,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from physanim.mesh.topology import accumulate_face_normals
+
 
 @dataclass(frozen=True)
 class MeshAnimation:
@@ -67,16 +69,8 @@ def frame_normals(points: NDArray, faces: NDArray) -> NDArray:
     frames, n = points.shape[0], points.shape[1]
     out = np.zeros((frames, n, 3), np.float32)
     for t in range(frames):
-        p, o = points[t], out[t]
-        for i in range(faces.shape[0]):
-            a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
-            ux, uy, uz = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
-            vx, vy, vz = p[c, 0] - p[a, 0], p[c, 1] - p[a, 1], p[c, 2] - p[a, 2]
-            nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-            for j in (a, b, c):
-                o[j, 0] += nx
-                o[j, 1] += ny
-                o[j, 2] += nz
+        o = out[t]
+        accumulate_face_normals(points[t], faces, o)
         for j in range(n):
             length = np.sqrt(o[j, 0] ** 2 + o[j, 1] ** 2 + o[j, 2] ** 2)
             if length > 0.0:

@@ -71,7 +71,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
     n = np.zeros_like(v)
-    _accumulate_face_normals(v, f, n)
+    accumulate_face_normals(v, f, n)
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     return n / np.where(norm > 0.0, norm, 1.0)
 
@@ -79,8 +79,10 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 # compiled: the renders take every frame's normals, and the numpy form (cross products, then a
 # bincount per axis) took 17 ms for the 166k triangles of face000 against 1 ms here
 @njit(cache=True, nogil=True)
-def _accumulate_face_normals(v: np.ndarray, f: np.ndarray, n: np.ndarray) -> None:
-    """Add each triangle's (2 x area x unit normal) to its three vertices' rows of ``n``."""
+def accumulate_face_normals(v: np.ndarray, f: np.ndarray, n: np.ndarray) -> None:
+    """Add each triangle's (2 x area x unit normal) of vertices ``v`` (V, 3), faces ``f``
+    (F, 3) to its three vertices' rows of ``n`` (V, 3), in their precision (compiled: callable
+    from other compiled kernels)."""
     for t in range(f.shape[0]):
         a, b, c = f[t, 0], f[t, 1], f[t, 2]
         ux, uy, uz = v[b, 0] - v[a, 0], v[b, 1] - v[a, 1], v[b, 2] - v[a, 2]
