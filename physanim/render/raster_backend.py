@@ -116,16 +116,16 @@ def _shade(
             rv = (2.0 * cos * nx - lights[k, 0]) * ex + (2.0 * cos * ny - lights[k, 1]) * ey
             rv += (2.0 * cos * nz - lights[k, 2]) * ez
             if rv > 0.0:
-                s = rv**SPECULAR_POWER
-                sr += s * colours[k, 0]
-                sg += s * colours[k, 1]
-                sb += s * colours[k, 2]
-        for c, d, s in ((0, dr, sr), (1, dg, sg), (2, db, sb)):
+                lobe = rv**SPECULAR_POWER
+                sr += lobe * colours[k, 0]
+                sg += lobe * colours[k, 1]
+                sb += lobe * colours[k, 2]
+        for c, diffuse, specular in ((0, dr, sr), (1, dg, sg), (2, db, sb)):
             if uniform:
                 a = albedo[0, c]
             elif per_cell:
                 a = albedo[f, c]
             else:
                 a = w0 * albedo[i0, c] + w1 * albedo[i1, c] + w2 * albedo[i2, c]
-            v = (AMBIENT + DIFFUSE * d) * a + SPECULAR * s
+            v = (AMBIENT + DIFFUSE * diffuse) * a + SPECULAR * specular
             image[p, c] = np.uint8(np.round(255.0 * min(max(v, 0.0), 1.0)))
