@@ -4,7 +4,7 @@ For each mesh (uniform ``tetra.edge_length_m`` of 4, 3, 2.5, 2 and 1.5 mm, and t
 refinement of ``configs/meshes/refined.yaml``) it runs tetra, materials, actuate, simulate and
 evaluate of the demo at the default (uniform) material, then materials, simulate and evaluate
 with models 2 and 3, each stage in its own process (``physanim run --local --only``), and
-prints per mesh: nodes, tets, the Cholesky factor's entries, peak memory and wall time of the
+prints per mesh: nodes, tets, the Newmark factor's entries, peak memory and wall time of the
 stages, factorisation and per-step solve time of simulate, the FEM's relative displacement
 error at the jaw-drop and smile peaks, its lip gap there and the philtrum peaks of models 2
 and 3 (right side, the edited one). Then the growth exponents of time and memory against nodes
@@ -43,37 +43,9 @@ FIGURES = ("fidelity_jaw", "fidelity_smile", "lip_gap_jaw_mm", "lip_gap_smile_mm
 
 def worker(stage: str, args: list[str]) -> None:
     """Run one stage in this process (the CLI's ``run --local --only``) and print a last
-    JSON line: its peak resident memory and, for simulate, the factor's entries."""
+    JSON line: its peak resident memory."""
     import resource
 
-    entries: list[int] = []
-    if stage == "simulate":
-        import sksparse.cholmod as cholmod
-
-        analyze = cholmod.analyze
-
-        class Counted:
-            """A CHOLMOD factor whose L() is counted (its entries, lower triangle)."""
-
-            def __init__(self, factor: Any) -> None:
-                self._factor = factor
-
-            def __getattr__(self, name: str) -> Any:
-                return getattr(self._factor, name)
-
-            def L(self) -> Any:  # noqa: N802  (CHOLMOD's name)
-                L = self._factor.L()
-                entries.append(int(L.nnz))
-                return L
-
-        class Symbolic:
-            def __init__(self, symbolic: Any) -> None:
-                self._symbolic = symbolic
-
-            def cholesky(self, A: Any) -> Counted:
-                return Counted(self._symbolic.cholesky(A))
-
-        cholmod.analyze = lambda *a, **k: Symbolic(analyze(*a, **k))
     from cli.app import main
 
     sys.argv = ["physanim", "run", "--local", "--only", stage, *args]
@@ -83,11 +55,11 @@ def worker(stage: str, args: list[str]) -> None:
         if exc.code:
             raise
     peak_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    print(json.dumps({"peak_rss_gb": peak_kb / 2**20, "factor_entries": entries}))
+    print(json.dumps({"peak_rss_gb": peak_kb / 2**20}))
 
 
 def run_stage(stage: str, args: list[str]) -> dict[str, Any]:
-    """One stage in a fresh process: its wall time (s) and key, peak memory, factor entries."""
+    """One stage in a fresh process: its wall time (s) and key, peak memory."""
     cmd = [sys.executable, __file__, "--worker", stage, "--", *args]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=env, check=False)
@@ -130,7 +102,7 @@ def measure(label: str, mesh_args: list[str]) -> dict[str, Any]:
     m2, m3 = ev2["philtrum_peak_mm"]["right"], ev3["philtrum_peak_mm"]["right"]
     row.update(
         nodes=tetra["n_nodes"], tets=tetra["n_tets"], min_dihedral_deg=tetra["min_dihedral_deg"],
-        regions=tetra.get("regions"), factor_entries=max(row["simulate"]["factor_entries"]),
+        regions=tetra.get("regions"), factor_entries=sim["factor_entries"],
         factorization_s=sim["seconds"]["factorization"],
         step_ms=1e3 * sim["seconds"]["stepping"] / max(sim["steps"], 1),
         inverted_tets=sim["inverted_tets"],

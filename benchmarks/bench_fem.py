@@ -32,6 +32,7 @@ from physanim.fem.linsolve import CholmodFactors, blas_in_use
 from physanim.fem.model import build_model
 from physanim.fem.newmark import Newmark, State
 from physanim.fem.params import SimulateParams
+from physanim.fem.pardiso import has_pardiso
 from physanim.fem.problem import FemProblem
 from physanim.fem.simulate import frames_per_thread_count, simulate_problem
 from physanim.pipeline import stage_inputs
@@ -179,12 +180,14 @@ def main() -> None:
         t0 = time.perf_counter()
         model = build_model(nodes, tets, mat, SimulateParams(formulation=form))
         t_asm = time.perf_counter() - t0
-        for solver, threads in (("cholmod", all_threads), ("cholmod", 1), ("superlu", 1),
-                                ("superlu_colamd", 1)):  # fmt: skip
+        pardiso = [("pardiso", all_threads)] if has_pardiso() else []
+        for solver, threads in (*pardiso, ("cholmod", all_threads), ("cholmod", 1),
+                                ("superlu", 1), ("superlu_colamd", 1)):  # fmt: skip
             numba.set_num_threads(threads)  # our solve and products; SuperLU is serial anyway
             t_fac, per_step, _ = time_steps(model, pres, dt, solver, args.baseline_steps)
             numba.set_num_threads(all_threads)
-            name = f"{form} / {solver}" + (f", {threads} thread(s)" if solver == "cholmod" else "")
+            threaded = solver in ("pardiso", "cholmod")
+            name = f"{form} / {solver}" + (f", {threads} thread(s)" if threaded else "")
             print(
                 f"{name:34s} {t_asm:10.2f} {t_fac:9.2f} {1e3 * per_step:8.2f} {dt / per_step:6.2f}"
             )

@@ -128,6 +128,8 @@ def performance_summary(
         "inverted_tets": int(len(result.inverted_tets)),
         "seconds": {k: round(v, 3) for k, v in result.timings.items()},
     }
+    if result.solver:  # a full run (a reduced preview has no factor of its own)
+        summary.update(solver=result.solver, factor_entries=result.factor_entries)
     if drive.jaw is not None:
         summary["jaw_max_angle_deg"] = round(float(np.degrees(drive.jaw.angle.max())), 3)
         summary["jaw_pivot_mm"] = [round(float(x) * 1e3, 2) for x in drive.jaw.pivot]

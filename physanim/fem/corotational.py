@@ -117,8 +117,9 @@ class CorotationalNewmark(Newmark):
             y[u] = x_u
             return (c0 * (m.M @ y) + self._element_force(self._blocks, R, y))[u]
 
-        op = spla.LinearOperator(self.A_uu.shape, matvec=matvec, dtype=np.float64)
-        pre = spla.LinearOperator(self.A_uu.shape, matvec=self.solve, dtype=np.float64)
+        shape = (self.free.size, self.free.size)
+        op = spla.LinearOperator(shape, matvec=matvec, dtype=np.float64)
+        pre = spla.LinearOperator(shape, matvec=self.solve, dtype=np.float64)
         count = [0]
 
         def cb(_: np.ndarray) -> None:

@@ -13,9 +13,10 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from physanim.fem.parallel_ldl import ParallelLDL
+from physanim.fem.pardiso import PardisoFactors, has_pardiso
 
 Solve = Callable[[np.ndarray], np.ndarray]
-SOLVERS = ("auto", "cholmod", "superlu", "superlu_colamd")
+SOLVERS = ("auto", "pardiso", "cholmod", "superlu", "superlu_colamd")
 
 
 def has_cholmod() -> bool:
@@ -23,16 +24,25 @@ def has_cholmod() -> bool:
     return find_spec("sksparse") is not None
 
 
-def without_subnormals(solve: Solve, n: int) -> Solve:
+def dynamic_solver(solver: str) -> str:
+    """The solver 'auto' means for the Newmark matrix: PARDISO (MKL) when it loads, else
+    CHOLMOD when installed, else SuperLU; any other name unchanged."""
+    if solver != "auto":
+        return solver
+    return "pardiso" if has_pardiso() else "cholmod" if has_cholmod() else "superlu"
+
+
+def without_subnormals(solve: Solve, n: int, floor: float = 1e-100) -> Solve:
     """Wrap ``solve`` so that its triangular sweeps never meet subnormal numbers.
 
     A localised right-hand side (a few driven nodes) gives a solution that decays
     exponentially away from them; its far field underflows to subnormals, which make the
     sweeps ~3x slower on x86. Solving for b + r with a fixed r = 1e-100 and subtracting
     x_r = A^-1 r keeps every intermediate far above the subnormal range; the change to x is
-    of order 1e-100 relative to A^-1, far below round-off of any physical answer.
+    of order 1e-100 relative to A^-1, far below round-off of any physical answer. ``floor``:
+    r's entries (1e-20 for a solve all in float32, whose subnormals start at 1e-38).
     """
-    r = np.full(n, 1e-100)
+    r = np.full(n, floor)
     x_r = solve(r)
 
     def guarded(b: np.ndarray) -> np.ndarray:
@@ -98,6 +108,7 @@ class CholmodFactors:
         self.mode, self.dtype = mode, dtype
         self._symbolic: Any = None
         self._ldl: ParallelLDL | None = None
+        self.factor_entries = 0  # entries of the last factor's L
 
     def __call__(self, A: sp.spmatrix) -> ParallelLDL:
         """Solver of A (n, n), which must have the pattern of the first matrix given."""
@@ -112,11 +123,13 @@ class CholmodFactors:
         factor = self._symbolic.cholesky(A)
         if self.mode == "supernodal":
             L = factor.L()
+            self.factor_entries = int(L.nnz)
             if self._ldl is None:
                 self._ldl = ParallelLDL.from_cholesky(L, factor.P(), dtype=self.dtype)
                 return self._ldl
             return self._ldl.refilled_cholesky(L)
         L, D = factor.L_D()
+        self.factor_entries = int(L.nnz)
         d = D.diagonal()
         if self._ldl is not None:
             try:
@@ -131,7 +144,8 @@ def factorize(A: sp.spmatrix, solver: str = "auto") -> Solve:
     """Factorise the SPD matrix ``A`` (n, n) and return ``solve(b) -> x`` for b (n,) or (n, k).
 
     solver: 'cholmod' (CHOLMOD's METIS ordering and supernodal LL^T factor, solved by
-    ``ParallelLDL`` on all threads; A must be positive definite), 'superlu' (SuperLU with
+    ``ParallelLDL`` on all threads; A must be positive definite), 'pardiso' (MKL PARDISO's
+    METIS ordering and supernodal LL^T, float64), 'superlu' (SuperLU with
     MMD(A^T+A) ordering and symmetric pivoting, right for SPD matrices), 'superlu_colamd'
     (scipy's default splu, the baseline) or 'auto' (cholmod when installed, else superlu).
     """
@@ -141,6 +155,8 @@ def factorize(A: sp.spmatrix, solver: str = "auto") -> Solve:
         solver = "cholmod" if has_cholmod() else "superlu"
     if solver == "cholmod":
         return without_subnormals(CholmodFactors("supernodal")(A), A.shape[0])
+    if solver == "pardiso":
+        return without_subnormals(PardisoFactors("spd")(A), A.shape[0])
     if solver == "superlu":
         lu = spla.splu(
             sp.csc_matrix(A),
@@ -177,27 +193,38 @@ def factorize_split(
     G: sp.spmatrix,
     w: np.ndarray,
     solver: str = "auto",
-    factors: CholmodFactors | None = None,
+    factors: CholmodFactors | PardisoFactors | None = None,
 ) -> Solve:
     """Solver for A = A_el + G^T diag(w) G (n, n) without forming the product.
 
-    A_el (n, n) SPD, G (k, n), w (k,) > 0. With CHOLMOD this factorises the quasi-definite
-    matrix [[A_el, G^T], [G, -diag(1/w)]] by sparse LDL^T (stable for quasi-definite matrices
-    under any symmetric ordering): G^T diag(w) G couples two rings of nodes and fills the
-    Cholesky factor, the augmented matrix only one ring. Other solvers factorise A directly.
-    ``factors``: a simplicial ``CholmodFactors`` to reuse across calls with one pattern.
+    A_el (n, n) SPD, G (k, n), w (k,) > 0. With CHOLMOD or PARDISO this factorises the
+    quasi-definite matrix [[A_el, G^T], [G, -diag(1/w)]] by sparse LDL^T (stable for
+    quasi-definite matrices under any symmetric ordering): G^T diag(w) G couples two rings of
+    nodes and fills the Cholesky factor, the augmented matrix only one ring. Other solvers
+    factorise A directly. ``factors``: a simplicial ``CholmodFactors`` or an 'indefinite'
+    ``PardisoFactors`` to reuse across calls with one pattern (its dtype sets the precision).
     """
     if solver == "auto":
         solver = "cholmod" if has_cholmod() else "superlu"
-    if solver != "cholmod":
+    if solver not in ("cholmod", "pardiso"):
         return factorize((A_el + G.T @ sp.diags(w) @ G).tocsc(), solver)
     n = A_el.shape[0]
     augmented = sp.bmat([[A_el, G.T], [G, sp.diags(-1.0 / w)]], format="csc")
-    factor = (factors or CholmodFactors("simplicial"))(augmented)
+    if factors is None:
+        factors = (
+            CholmodFactors("simplicial") if solver == "cholmod" else PardisoFactors("indefinite")
+        )
+    factor = factors(augmented)
+    if isinstance(factors, PardisoFactors) and factor.inertia[1] != G.shape[0]:
+        raise ValueError(
+            f"the augmented matrix is not quasi-definite ({factor.inertia[1]} negative pivots "
+            f"for {G.shape[0]} constraint rows): A_el is not positive definite"
+        )
+    single = getattr(factors, "dtype", np.float64) == np.float32 and solver == "pardiso"
 
     def solve(b: np.ndarray) -> np.ndarray:
-        rhs = np.zeros((factor.n,) + b.shape[1:])
+        rhs = np.zeros((augmented.shape[0],) + b.shape[1:])
         rhs[:n] = b
         return factor(rhs)[:n]
 
-    return without_subnormals(solve, n)
+    return without_subnormals(solve, n, 1e-20 if single else 1e-100)

@@ -22,13 +22,14 @@ from threadpoolctl import threadpool_limits
 from physanim.fem.linsolve import (
     CholmodFactors,
     Solve,
+    dynamic_solver,
     factorize,
     factorize_split,
-    has_cholmod,
     optimized_blas,
     without_subnormals,
 )
 from physanim.fem.parallel_spmv import ParallelCSR, SymmetricQuadraticForm
+from physanim.fem.pardiso import PardisoFactors
 from physanim.fem.statics import free_dofs
 
 
@@ -49,14 +50,17 @@ class Newmark:
     """Average-acceleration Newmark integrator; A_uu is factorised in the constructor.
 
     K, M, C: (n, n) sparse, N/m, kg, N s/m. dt: step, s. prescribed: (n_c,) DOF indices.
+    solver: 'auto' (``dynamic_solver``: PARDISO, else CHOLMOD, else SuperLU) or a name.
     split: optional (K_el, G, w) with K = K_el + G^T diag(w) G (the 'anp' model), which lets
-    CHOLMOD factorise a sparser augmented matrix when its BLAS is the slow reference one (see
-    ``factorize_split``); with an optimised BLAS its supernodal LL^T of A_uu is faster.
-    precision: 'float64'; 'float32', the factor stored in single precision (CHOLMOD only;
-    other solvers keep float64): each solve is then exact for a matrix within float32
-    round-off of A_uu, so the steps are Newmark's on a stiffness perturbed by ~1e-7 relative,
-    stable and off the float64 steps by as little; or 'mixed', a float32 factor with each
-    solve refined once with the float64 matrix (twice the solves; CHOLMOD only).
+    PARDISO, and CHOLMOD when its BLAS is the slow reference one, factorise the sparser
+    augmented matrix (see ``factorize_split``); with an optimised BLAS CHOLMOD's supernodal
+    LL^T of A_uu is faster than its simplicial LDL^T of the augmented one.
+    precision: 'float64'; 'float32', the factor stored in single precision (PARDISO and
+    CHOLMOD; other solvers keep float64): each solve is then exact for a matrix within
+    float32 round-off of A_uu (or of the augmented matrix), so the steps are Newmark's on a
+    stiffness perturbed by ~1e-7 relative, stable and off the float64 steps by as little; or
+    'mixed', a float32 factor with each solve refined once with the float64 matrix (twice
+    the solves).
     ``with_dt`` makes integrators at other step sizes that share everything but the factor,
     whose symbolic analysis they share too.
     """
@@ -76,30 +80,36 @@ class Newmark:
         self.prescribed = np.asarray(prescribed, dtype=np.int64)
         self.free = free_dofs(n, self.prescribed)
         self.K, self.M, self.C = sp.csr_matrix(K), sp.csr_matrix(M), sp.csr_matrix(C)
-        self.solver = "cholmod" if solver == "auto" and has_cholmod() else solver
-        if self.solver == "auto":
-            self.solver = "superlu"
+        self.solver = dynamic_solver(solver)
         if precision not in ("float64", "float32", "mixed"):
             raise ValueError(
                 f"precision must be 'float64', 'float32' or 'mixed', got {precision!r}"
             )
-        if precision == "mixed" and self.solver != "cholmod":
-            raise ValueError("precision 'mixed' needs solver 'cholmod'")
-        self.precision = precision if self.solver == "cholmod" else "float64"
+        factored = self.solver in ("cholmod", "pardiso")
+        if precision == "mixed" and not factored:
+            raise ValueError("precision 'mixed' needs solver 'pardiso' or 'cholmod'")
+        self.precision = precision if factored else "float64"
         u = self.free
         sub = lambda X: X[u][:, u]  # noqa: E731
-        # A_uu(dt) = K_uu + (4/dt^2) M_uu + (2/dt) C_uu: values on one pattern, combined per dt
         self._M_uu = sub(self.M)  # on its own pattern: initial accelerations
-        self._pattern, self._kmc = _common_pattern(sub(self.K), self._M_uu, sub(self.C))
         self._split = None
-        if split is not None and self.solver == "cholmod" and not optimized_blas():
+        stiffness = self.K
+        if split is not None and (
+            self.solver == "pardiso" or (self.solver == "cholmod" and not optimized_blas())
+        ):
             K_el, G, w = split
-            self._split = (sub(sp.csr_matrix(K_el)), sp.csr_matrix(G)[:, u], w)
-        self._factors = None
+            self._split = (sp.csr_matrix(G)[:, u], w)
+            stiffness = sp.csr_matrix(K_el)
+        # A(dt) = K_uu + (4/dt^2) M_uu + (2/dt) C_uu (with the split: A_el, K_el in place of
+        # K, and A_uu = A_el + G^T diag(w) G is never formed): values on one pattern
+        self._pattern, self._kmc = _common_pattern(sub(stiffness), self._M_uu, sub(self.C))
+        self._factors: CholmodFactors | PardisoFactors | None = None
+        dtype = np.float64 if precision == "float64" else np.float32
         if self.solver == "cholmod":
-            dtype = np.float64 if precision == "float64" else np.float32
             mode = "supernodal" if self._split is None else "simplicial"
             self._factors = CholmodFactors(mode, dtype)
+        elif self.solver == "pardiso":
+            self._factors = PardisoFactors("spd" if self._split is None else "indefinite", dtype)
         # rhs_u = [M_u: | C_u: | K_uc] @ [x_m; x_c; -d_c] in a single sparse product
         rows = lambda X: X[u]  # noqa: E731
         self._H = ParallelCSR(
@@ -113,24 +123,36 @@ class Newmark:
         self.dt = float(dt)
         c0, c1 = 4.0 / self.dt**2, 2.0 / self.dt
         k, m, c = self._kmc
-        self.A_uu = self._pattern.copy()
-        self.A_uu.data = k + c0 * m + c1 * c
+        self._A = self._pattern.copy()
+        self._A.data = k + c0 * m + c1 * c
+        if self._factors is None:
+            self.solve: Solve = factorize(self._A, self.solver)
+            return
         if self._split is not None:
-            K_el, G, w = self._split
-            A_el = K_el + c0 * self._pattern_part(1) + c1 * self._pattern_part(2)
-            self.solve: Solve = factorize_split(A_el, G, w, self.solver, self._factors)
-        elif self._factors is not None:
-            solve = self._factors(self.A_uu)
-            if self.precision == "mixed":
-                solve = _refined(solve, ParallelCSR(self.A_uu))
-            self.solve = without_subnormals(solve, self.A_uu.shape[0])
+            G, w = self._split
+            solve = factorize_split(self._A, G, w, self.solver, self._factors)
         else:
-            self.solve = factorize(self.A_uu, self.solver)
+            single = self.solver == "pardiso" and self.precision != "float64"
+            solve = without_subnormals(
+                self._factors(self._A), self._A.shape[0], 1e-20 if single else 1e-100
+            )
+        if self.precision == "mixed":
+            solve = _refined(solve, ParallelCSR(self.A_uu))
+        self.solve = solve
 
-    def _pattern_part(self, i: int) -> sp.csc_matrix:
-        out = self._pattern.copy()
-        out.data = self._kmc[i].copy()
-        return out
+    @property
+    def factor_entries(self) -> int:
+        """Entries of the factor's L (PARDISO, CHOLMOD; 0 for SuperLU, not counted)."""
+        return getattr(self._factors, "factor_entries", 0)
+
+    @property
+    def A_uu(self) -> sp.csc_matrix:
+        """The step's matrix K_uu + (4/dt^2) M_uu + (2/dt) C_uu (n_free, n_free); with the
+        split it is formed here, from A_el + G^T diag(w) G."""
+        if self._split is None:
+            return self._A
+        G, w = self._split
+        return (self._A + G.T @ sp.diags(w) @ G).tocsc()
 
     def with_dt(self, dt: float) -> Newmark:
         """This integrator at step ``dt`` (s): shares the matrices, products and symbolic

@@ -44,7 +44,9 @@ class SimResult:
     whose error estimate stayed above the tolerance at the smallest step allowed;
     solver_threads (T,) numba threads used for each frame (all, or 1 when that was faster:
     cores busy with other processes; one frame in 30 tries the other count);
-    timings: seconds spent in 'assembly', 'factorization', 'stepping'.
+    timings: seconds spent in 'assembly', 'factorization', 'stepping'; solver: the Newmark
+    matrix's solver ('pardiso', 'cholmod', 'superlu', ...); factor_entries: its factor's L
+    (0 where not counted).
     """
 
     displacements: np.ndarray
@@ -64,6 +66,8 @@ class SimResult:
     solver_threads: np.ndarray | None = None
     check_steps: int = 0
     frames_over_tolerance: int = 0
+    solver: str = ""
+    factor_entries: int = 0
 
 
 def frames_per_thread_count(solver_threads: np.ndarray) -> dict[str, int]:
@@ -209,6 +213,8 @@ def simulate_problem(
         corot_iterations=None if iters is None else np.asarray(iters),
         frame_substeps=substeps,
         solver_threads=threads,
+        solver=integ.solver,
+        factor_entries=integ.factor_entries,
         check_steps=stepper.check_steps,
         frames_over_tolerance=stepper.over,
     )

@@ -12,6 +12,7 @@ from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.newmark import Newmark, State
 from physanim.fem.params import SimulateParams
+from physanim.fem.pardiso import has_pardiso
 from physanim.fem.statics import solve_static
 
 
@@ -104,9 +105,11 @@ def test_mesh_dynamics_second_order_against_exact_solution():
 
 
 @pytest.mark.parametrize("slow_blas", [False, True])
-@pytest.mark.parametrize("solver", ["auto", "superlu", "superlu_colamd"])
+@pytest.mark.parametrize("solver", ["auto", "pardiso", "cholmod", "superlu", "superlu_colamd"])
 def test_split_anp_solver_matches_direct_solve(solver, slow_blas, monkeypatch):
-    # with the reference BLAS, CHOLMOD factorises the sparser augmented matrix instead
+    # PARDISO, and CHOLMOD under the reference BLAS, factorise the sparser augmented matrix
+    if solver == "pardiso" and not has_pardiso() or solver == "cholmod" and not has_cholmod():
+        pytest.skip(f"{solver} not installed")
     monkeypatch.setattr(newmark_module, "optimized_blas", lambda: not slow_blas)
     model, fixed, d0 = _cantilever(eta=2.0)
     direct = Newmark(model.K, model.M, model.C, 1e-4, fixed, "superlu")
@@ -120,11 +123,16 @@ def test_split_anp_solver_matches_direct_solve(solver, slow_blas, monkeypatch):
 
 
 @pytest.mark.parametrize("slow_blas", [False, True])
-def test_auto_solver_splits_with_cholmod_only_under_a_slow_blas(slow_blas, monkeypatch):
+def test_solvers_split_the_anp_matrix_where_it_pays(slow_blas, monkeypatch):
+    # 'auto' is PARDISO when MKL loads (always the augmented matrix), else CHOLMOD, which
+    # takes the augmented matrix only under the reference BLAS
     if not has_cholmod():
-        pytest.skip("CHOLMOD (scikit-sparse) not installed: the auto solver's choice not run")
+        pytest.skip("CHOLMOD (scikit-sparse) not installed: the solvers' choice not run")
     monkeypatch.setattr(newmark_module, "optimized_blas", lambda: not slow_blas)
     model, fixed, _ = _cantilever(eta=2.0)
-    split = Newmark(model.K, model.M, model.C, 1e-4, fixed, "auto", model.split)
-    assert split.solver == "cholmod"
-    assert (split._split is not None) == slow_blas
+    auto = Newmark(model.K, model.M, model.C, 1e-4, fixed, "auto", model.split)
+    assert auto.solver == ("pardiso" if has_pardiso() else "cholmod")
+    cholmod = Newmark(model.K, model.M, model.C, 1e-4, fixed, "cholmod", model.split)
+    assert (cholmod._split is not None) == slow_blas
+    if has_pardiso():
+        assert auto._split is not None
