@@ -102,36 +102,53 @@ class _Handle:
         """One PARDISO call; b (n, k) Fortran-ordered, solved in place (phase 33). Returns
         the call's iparm (64,), read before another thread's call can change it."""
         x = np.empty_like(b) if b is not None else None
-        nrhs = 1 if b is None or b.ndim == 1 else b.shape[1]
-        err = ctypes.c_int32(0)
-        ptr = lambda arr: None if arr is None else arr.ctypes.data_as(ctypes.c_void_p)  # noqa: E731
-        i32 = lambda v: ctypes.byref(ctypes.c_int32(v))  # noqa: E731
         with self.lock:
             # always numba's pool size, whatever count numba runs on now or threadpoolctl set
             # for MKL's BLAS: PARDISO's factor and sweeps, and so its results, depend on it
             before = self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(work_partitions()))
-            self.lib.pardiso(
-                ptr(self.pt), i32(self.slots), i32(mnum), i32(self.mtype), i32(phase),
-                i32(self.n), ptr(a), ptr(self.indptr), ptr(self.indices), None, i32(nrhs),
-                ptr(self.iparm), i32(0), ptr(b), ptr(x), ctypes.byref(err),
-            )  # fmt: skip
+            err = _pardiso(self.lib, self.pt, self.iparm, self.slots, mnum, self.mtype, phase,
+                           self.n, a, self.indptr, self.indices, b, x)  # fmt: skip
             self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(before))
             iparm = self.iparm.copy()
-        if err.value:
-            why = _MESSAGES.get(err.value, "see MKL's PARDISO error codes")
-            raise RuntimeError(f"PARDISO phase {phase}: error {err.value} ({why})")
+        if err:
+            why = _MESSAGES.get(err, "see MKL's PARDISO error codes")
+            raise RuntimeError(f"PARDISO phase {phase}: error {err} ({why})")
         if x is not None:
             b[...] = x
         return iparm
 
 
-def _release_all(lib: ctypes.CDLL, pt: np.ndarray, iparm: np.ndarray, *args: int) -> None:
-    mtype, slots, n = args
-    err = ctypes.c_int32(0)
+def _pardiso(
+    lib: ctypes.CDLL,
+    pt: np.ndarray,
+    iparm: np.ndarray,
+    maxfct: int,
+    mnum: int,
+    mtype: int,
+    phase: int,
+    n: int,
+    a: np.ndarray | None = None,
+    ia: np.ndarray | None = None,
+    ja: np.ndarray | None = None,
+    b: np.ndarray | None = None,
+    x: np.ndarray | None = None,
+) -> int:
+    """MKL's ``pardiso`` with its scalars by reference (arrays a phase does not read may be
+    None). Returns its error code (0: success)."""
+    ptr = lambda arr: None if arr is None else arr.ctypes.data_as(ctypes.c_void_p)  # noqa: E731
     i32 = lambda v: ctypes.byref(ctypes.c_int32(v))  # noqa: E731
-    p = lambda arr: arr.ctypes.data_as(ctypes.c_void_p)  # noqa: E731
-    lib.pardiso(p(pt), i32(slots), i32(1), i32(mtype), i32(-1), i32(n), None, None, None,
-                None, i32(1), p(iparm), i32(0), None, None, ctypes.byref(err))  # fmt: skip
+    nrhs = 1 if b is None or b.ndim == 1 else b.shape[1]
+    err = ctypes.c_int32(0)
+    lib.pardiso(ptr(pt), i32(maxfct), i32(mnum), i32(mtype), i32(phase), i32(n), ptr(a), ptr(ia),
+                ptr(ja), None, i32(nrhs), ptr(iparm), i32(0), ptr(b), ptr(x),
+                ctypes.byref(err))  # fmt: skip
+    return err.value
+
+
+def _release_all(lib: ctypes.CDLL, pt: np.ndarray, iparm: np.ndarray, *args: int) -> None:
+    """Phase -1: frees every factor and the analysis of a handle (its finaliser)."""
+    mtype, slots, n = args
+    _pardiso(lib, pt, iparm, slots, 1, mtype, -1, n)
 
 
 class PardisoSolve:
@@ -146,7 +163,6 @@ class PardisoSolve:
         weakref.finalize(self, _release_slot, handle, self.slot)
         iparm = handle.call(22, self.slot, self.values)
         self.inertia = (int(iparm[21]), int(iparm[22]))  # (+, -) pivots
-        self.perturbed = int(iparm[13])  # pivots PARDISO had to perturb
 
     def __call__(self, b: np.ndarray) -> np.ndarray:
         rhs = np.asfortranarray(b, dtype=self.handle.dtype)
