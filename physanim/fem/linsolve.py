@@ -40,7 +40,7 @@ def without_subnormals(solve: Solve, n: int, floor: float = 1e-100) -> Solve:
     sweeps ~3x slower on x86. Solving for b + r with a fixed r = 1e-100 and subtracting
     x_r = A^-1 r keeps every intermediate far above the subnormal range; the change to x is
     of order 1e-100 relative to A^-1, far below round-off of any physical answer. ``floor``:
-    r's entries (1e-20 for a solve all in float32, whose subnormals start at 1e-38).
+    r's entries (``subnormal_floor``).
     """
     r = np.full(n, floor)
     x_r = solve(r)
@@ -51,6 +51,13 @@ def without_subnormals(solve: Solve, n: int, floor: float = 1e-100) -> Solve:
         return solve(b + r[:, None]) - x_r[:, None]
 
     return guarded
+
+
+def subnormal_floor(factors: object) -> float:
+    """``without_subnormals``' r for solves by ``factors``: 1e-20 where PARDISO sweeps in
+    float32 (its subnormals start at 1e-38), else 1e-100 (float64 sweeps)."""
+    single = isinstance(factors, PardisoFactors) and np.dtype(factors.dtype) == np.float32
+    return 1e-20 if single else 1e-100
 
 
 def _require_cholmod() -> None:
@@ -220,11 +227,10 @@ def factorize_split(
             f"the augmented matrix is not quasi-definite ({factor.inertia[1]} negative pivots "
             f"for {G.shape[0]} constraint rows): A_el is not positive definite"
         )
-    single = getattr(factors, "dtype", np.float64) == np.float32 and solver == "pardiso"
 
     def solve(b: np.ndarray) -> np.ndarray:
         rhs = np.zeros((augmented.shape[0],) + b.shape[1:])
         rhs[:n] = b
         return factor(rhs)[:n]
 
-    return without_subnormals(solve, n, 1e-20 if single else 1e-100)
+    return without_subnormals(solve, n, subnormal_floor(factors))

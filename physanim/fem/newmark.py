@@ -26,6 +26,7 @@ from physanim.fem.linsolve import (
     factorize,
     factorize_split,
     optimized_blas,
+    subnormal_floor,
     without_subnormals,
 )
 from physanim.fem.parallel_spmv import ParallelCSR, SymmetricQuadraticForm
@@ -133,9 +134,8 @@ class Newmark:
             G, w = self._split
             solve = factorize_split(self._A, G, w, self.solver, self._factors)
         else:
-            single = self.solver == "pardiso" and self.precision != "float64"
             solve = without_subnormals(
-                self._factors(self._A), self._A.shape[0], 1e-20 if single else 1e-100
+                self._factors(self._A), self._A.shape[0], subnormal_floor(self._factors)
             )
         if self.precision == "mixed":
             solve = _refined(solve, ParallelCSR(self.A_uu))
