@@ -10,6 +10,7 @@ import hashlib
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit, prange
 
 from physanim.fem.geometry import element_dofs
 
@@ -56,7 +57,30 @@ def volumetric_matrix(coef: np.ndarray) -> np.ndarray:
 
 def element_blocks(B: np.ndarray, volumes: np.ndarray, D: np.ndarray) -> np.ndarray:
     """Element matrices V B^T D B (M, 12, 12) for Voigt material matrices D (M, 6, 6)."""
-    return np.einsum("mia,mij,mjb->mab", B, D * volumes[:, None, None], B, optimize=True)
+    out = np.empty((len(B), 12, 12))
+    _element_blocks(np.ascontiguousarray(B, np.float64), np.asarray(volumes, np.float64),
+                    np.ascontiguousarray(D, np.float64), out)  # fmt: skip
+    return out
+
+
+# one pass per tet on numba's threads: numpy's einsum made (M, 6, 12) and (M, 12, 12)
+# temporaries and took 0.65 s per matrix on a 2 mm demo mesh (150k tets), this 0.05 s
+@njit(cache=True, parallel=True)
+def _element_blocks(B, volumes, D, out):
+    for e in prange(B.shape[0]):
+        db = np.empty((6, 12))  # V D B
+        for i in range(6):
+            for b in range(12):
+                acc = 0.0
+                for j in range(6):
+                    acc += D[e, i, j] * B[e, j, b]
+                db[i, b] = volumes[e] * acc
+        for a in range(12):
+            for b in range(12):
+                acc = 0.0
+                for i in range(6):
+                    acc += B[e, i, a] * db[i, b]
+                out[e, a, b] = acc
 
 
 def assemble(blocks: np.ndarray, tets: np.ndarray, n_nodes: int) -> sp.csr_matrix:

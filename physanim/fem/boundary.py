@@ -209,15 +209,19 @@ class BoundaryConditions:
         return (d[1:] - d[:-1] - h * v[:-1] - 0.25 * h * h * (a[:-1] + a[1:])).sum(axis=0)
 
     def with_springs(
-        self, K: sp.csr_matrix, split: tuple[sp.csr_matrix, sp.csr_matrix, NDArray] | None
-    ) -> tuple[sp.csr_matrix, tuple[sp.csr_matrix, sp.csr_matrix, NDArray] | None]:
-        """Stiffness K (n, n) N/m and its optional split (K_el, G, w) plus the springs'."""
+        self,
+        K: sp.csr_matrix | None,
+        split: tuple[sp.csr_matrix, sp.csr_matrix, NDArray] | None,
+    ) -> tuple[sp.csr_matrix | None, tuple[sp.csr_matrix, sp.csr_matrix, NDArray] | None]:
+        """Stiffness K (n, n) N/m and its optional split (K_el, G, w) plus the springs'
+        (K may be None when the split is given: it stays None)."""
         if self.springs is None:
             return K, split
-        k_springs = self.springs.matrix(K.shape[0])
+        n = (K if K is not None else split[0]).shape[0]
+        k_springs = self.springs.matrix(n)
         if split is not None:
             split = ((split[0] + k_springs).tocsr(), split[1], split[2])
-        return (K + k_springs).tocsr(), split
+        return None if K is None else (K + k_springs).tocsr(), split
 
     def spring_force(self, free: NDArray) -> FrameForce | None:
         """The springs' forces k_i u_i(t) over the ``free`` (n_u,) DOFs, or None without
@@ -228,11 +232,12 @@ class BoundaryConditions:
         forces = s.targets.reshape(len(s.targets), -1) * np.repeat(s.stiffness, 3)
         return FrameForce(forces, dofs, np.searchsorted(free, dofs), self.frame_dt, len(free))
 
-    def drive_energy(self, K: sp.csr_matrix) -> float:
+    def drive_energy(self, k_diag: NDArray) -> float:
         """Energy scale of the drive, J: the largest 0.5 sum_i K_ii u_i^2 of a frame's
-        prescribed displacements, or of a frame's spring targets if larger."""
+        prescribed displacements (K_ii: the stiffness' diagonal ``k_diag`` (n,) N/m), or of
+        a frame's spring targets if larger."""
         n_fix = 3 * self.fixed_idx.size
-        k_diag = K.diagonal()[self.prescribed_dofs]
+        k_diag = k_diag[self.prescribed_dofs]
         u = np.hstack([self.values, np.zeros((self.n_frames, n_fix))])
         energy = 0.5 * float(((u**2) @ k_diag).max())
         if self.springs is not None:

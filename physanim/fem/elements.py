@@ -26,16 +26,22 @@ from physanim.fem.assembly import (
 
 @dataclass(frozen=True)
 class Stiffness:
-    """K (3N, 3N) N/m; ``k_blocks`` (M, 12, 12) element blocks and their assembly K_el; with
-    averaged nodal pressure K = K_el + G^T diag(w_vol) G (G (N, 3N), S (N, M), w_vol (N,) N m),
-    else G, S, w_vol are None and K = K_el."""
+    """``k_blocks`` (M, 12, 12) element blocks and their assembly K_el (3N, 3N) N/m; with
+    averaged nodal pressure the stiffness is K = K_el + G^T diag(w_vol) G (G (N, 3N),
+    S (N, M), w_vol (N,) N m), else G, S, w_vol are None and K = K_el (:func:`formed`)."""
 
-    K: sp.csr_matrix
     K_el: sp.csr_matrix
     k_blocks: np.ndarray
     G: sp.csr_matrix | None = None
     S: sp.csr_matrix | None = None
     w_vol: np.ndarray | None = None
+
+
+def formed(K_el: sp.csr_matrix, G: sp.csr_matrix | None, w: np.ndarray | None) -> sp.csr_matrix:
+    """K = K_el + G^T diag(w) G (3N, 3N) CSR, or K_el when G is None. The product couples
+    two rings of nodes (a 2 mm demo mesh: 17M entries against K_el's 3.7M, 1.3 s to form):
+    products and solves take the split form where they can."""
+    return K_el if G is None else (K_el + G.T @ sp.diags(w) @ G).tocsr()
 
 
 class Element(ABC):
@@ -65,8 +71,7 @@ class PlainTet(Element):
 
     def stiffness(self, B, grads, volumes, tets, n_nodes, mu, kappa) -> Stiffness:
         k_blocks = element_blocks(B, volumes, deviatoric_matrix(mu) + volumetric_matrix(kappa))
-        K = assemble(k_blocks, tets, n_nodes)
-        return Stiffness(K=K, K_el=K, k_blocks=k_blocks)
+        return Stiffness(K_el=assemble(k_blocks, tets, n_nodes), k_blocks=k_blocks)
 
 
 class AveragedNodalPressureTet(Element):
@@ -81,8 +86,7 @@ class AveragedNodalPressureTet(Element):
         S = nodal_average(tets, volumes, n_nodes)
         G = nodal_divergence(grads, tets, S)
         w_vol = nodal_volumes(tets, kappa * volumes, n_nodes)  # kappa_n V_n, volume-averaged
-        K = (K_el + G.T @ sp.diags(w_vol) @ G).tocsr()
-        return Stiffness(K=K, K_el=K_el, k_blocks=k_blocks, G=G, S=S, w_vol=w_vol)
+        return Stiffness(K_el=K_el, k_blocks=k_blocks, G=G, S=S, w_vol=w_vol)
 
 
 ELEMENTS: dict[str, Element] = {e.name: e for e in (PlainTet(), AveragedNodalPressureTet())}

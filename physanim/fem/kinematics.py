@@ -19,7 +19,7 @@ from physanim.fem.corotational import (
 )
 from physanim.fem.model import FemModel
 from physanim.fem.newmark import Newmark
-from physanim.fem.parallel_spmv import SymmetricQuadraticForm
+from physanim.fem.parallel_spmv import ParallelCSR, SymmetricQuadraticForm
 from physanim.fem.params import SimulateParams
 
 Split = tuple[sp.csr_matrix, sp.csr_matrix, np.ndarray] | None
@@ -51,7 +51,9 @@ class Linear:
 
     def __init__(self, model: FemModel, params: SimulateParams) -> None:
         self.model, self.params = model, params
-        self._strain = SymmetricQuadraticForm(model.K)
+        # d^T K d = d^T K_el d + (G d)^T diag(w) (G d): K_el's one ring, not K's two
+        self._strain = SymmetricQuadraticForm(model.K_el)
+        self._volumetric = None if model.G is None else ParallelCSR(model.G)
 
     def integrator(
         self, stiffness: sp.csr_matrix, split: Split, dt: float, prescribed: np.ndarray
@@ -63,7 +65,10 @@ class Linear:
         return d[self.model.dofs]
 
     def strain_energy(self, d: np.ndarray, u_elem: np.ndarray) -> float:
-        return 0.5 * self._strain(d)
+        energy = self._strain(d)
+        if self._volumetric is not None:
+            energy += float(self.model.w_vol @ (self._volumetric @ d) ** 2)
+        return 0.5 * energy
 
 
 class Corotational:

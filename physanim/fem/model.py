@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
 from physanim.fem.assembly import assemble, element_blocks, mass_matrix, strain_displacement
-from physanim.fem.elements import ELEMENTS, Element
+from physanim.fem.elements import ELEMENTS, Element, formed
 from physanim.fem.geometry import element_dofs, shape_gradients
 from physanim.fem.laws import MaterialLaw
 from physanim.fem.materials import TetMaterials
@@ -44,9 +45,11 @@ def _von_mises(grads, d_elem, mu, out):
 class FemModel:
     """Linear viscoelastic tet model. Matrices are (3N, 3N) CSR, DOFs interleaved x, y, z.
 
-    K: stiffness, N/m. M: mass, kg. C: viscous damping, N s/m. K_el: the assembled
-    ``k_blocks`` (equal to K for 'p1', the deviatoric part for 'anp'). ``formulation``: the
-    element's name; ``mu`` (M,) the law's shear modulus, Pa (for the von Mises stress).
+    K: stiffness, N/m, formed on first use (for 'anp' it couples two rings of nodes: the
+    simulation's products and solves use the split, :attr:`split`). M: mass, kg. C: viscous
+    damping, N s/m. K_el: the assembled ``k_blocks`` (equal to K for 'p1', the deviatoric
+    part for 'anp'). ``formulation``: the element's name; ``mu`` (M,) the law's shear
+    modulus, Pa (for the von Mises stress).
     ``k_blocks`` / ``c_blocks`` (M, 12, 12): element stiffness / damping blocks; for the
     'anp' formulation ``k_blocks`` holds only the deviatoric part and the volumetric part is
     G^T diag(w_vol) G with the nodal divergence G (N, 3N) = S (N, M) times the per-tet
@@ -59,7 +62,6 @@ class FemModel:
     volumes: np.ndarray
     mu: np.ndarray
     formulation: str
-    K: sp.csr_matrix
     K_el: sp.csr_matrix
     M: sp.csr_matrix
     C: sp.csr_matrix
@@ -79,6 +81,15 @@ class FemModel:
         out = np.empty(len(self.tets))
         _von_mises(self.grads, np.ascontiguousarray(d_elem, dtype=np.float64), self.mu, out)
         return out
+
+    @cached_property
+    def K(self) -> sp.csr_matrix:
+        return formed(self.K_el, self.G, self.w_vol)
+
+    def stiffness_diagonal(self) -> np.ndarray:
+        """diag(K) (3N,) N/m without forming K."""
+        k = self.K_el.diagonal()
+        return k if self.G is None else k + self.G.power(2).T @ self.w_vol
 
     @property
     def split(self) -> tuple[sp.csr_matrix, sp.csr_matrix, np.ndarray] | None:
@@ -119,7 +130,6 @@ def build_model(
         volumes=vol,
         mu=mu,
         formulation=element.name,
-        K=stiff.K,
         K_el=stiff.K_el,
         M=mass_matrix(tets, vol, mat.rho, n, lumped=params.mass == "lumped"),
         C=assemble(c_blocks, tets, n),

@@ -19,6 +19,7 @@ import scipy.sparse.linalg as spla
 from numba import njit, prange
 from threadpoolctl import threadpool_limits
 
+from physanim.fem.elements import formed
 from physanim.fem.linsolve import (
     CholmodFactors,
     Solve,
@@ -55,7 +56,8 @@ class Newmark:
     split: optional (K_el, G, w) with K = K_el + G^T diag(w) G (the 'anp' model), which lets
     PARDISO, and CHOLMOD when its BLAS is the slow reference one, factorise the sparser
     augmented matrix (see ``factorize_split``); with an optimised BLAS CHOLMOD's supernodal
-    LL^T of A_uu is faster than its simplicial LDL^T of the augmented one.
+    LL^T of A_uu is faster than its simplicial LDL^T of the augmented one. K may be None
+    with a split: formed from it only if the solver needs it (its products take the split).
     precision: 'float64'; 'float32' (PARDISO and CHOLMOD; SuperLU keeps float64): with
     CHOLMOD the factor stored in single precision and swept in float64, each solve exact for
     a matrix within float32 round-off of A_uu, so the steps are Newmark's on a stiffness
@@ -69,7 +71,7 @@ class Newmark:
 
     def __init__(
         self,
-        K: sp.spmatrix,
+        K: sp.spmatrix | None,
         M: sp.spmatrix,
         C: sp.spmatrix,
         dt: float,
@@ -78,10 +80,14 @@ class Newmark:
         split: tuple[sp.spmatrix, sp.spmatrix, np.ndarray] | None = None,
         precision: str = "float64",
     ) -> None:
-        n = K.shape[0]
+        if K is None and split is None:
+            raise ValueError("Newmark needs the stiffness K or its split (K_el, G, w)")
+        n = M.shape[0]
         self.prescribed = np.asarray(prescribed, dtype=np.int64)
         self.free = free_dofs(n, self.prescribed)
-        self.K, self.M, self.C = sp.csr_matrix(K), sp.csr_matrix(M), sp.csr_matrix(C)
+        self._K = None if K is None else sp.csr_matrix(K)
+        self.M, self.C = sp.csr_matrix(M), sp.csr_matrix(C)
+        self._stiffness_split = None if split is None else (sp.csr_matrix(split[0]), *split[1:])
         self.solver = dynamic_solver(solver)
         if precision not in ("float64", "float32", "mixed"):
             raise ValueError(
@@ -95,13 +101,14 @@ class Newmark:
         sub = lambda X: X[u][:, u]  # noqa: E731
         self._M_uu = sub(self.M)  # on its own pattern: initial accelerations
         self._split = None
-        stiffness = self.K
         if split is not None and (
             self.solver == "pardiso" or (self.solver == "cholmod" and not optimized_blas())
         ):
-            K_el, G, w = split
+            K_el, G, w = self._stiffness_split
             self._split = (sp.csr_matrix(G)[:, u], w)
-            stiffness = sp.csr_matrix(K_el)
+            stiffness = K_el
+        else:
+            stiffness = self.K
         # A(dt) = K_uu + (4/dt^2) M_uu + (2/dt) C_uu (with the split: A_el, K_el in place of
         # K, and A_uu = A_el + G^T diag(w) G is never formed): values on one pattern
         self._pattern, self._kmc = _common_pattern(sub(stiffness), self._M_uu, sub(self.C))
@@ -114,12 +121,34 @@ class Newmark:
             self._factors = PardisoFactors("spd" if self._split is None else "indefinite", dtype)
         # rhs_u = [M_u: | C_u: | K_uc] @ [x_m; x_c; -d_c] in a single sparse product
         rows = lambda X: X[u]  # noqa: E731
-        self._H = ParallelCSR(
-            sp.hstack([rows(self.M), rows(self.C), rows(self.K)[:, self.prescribed]])
-        )
+        self._H = ParallelCSR(sp.hstack([rows(self.M), rows(self.C), self._K_block(u)]))
         self._x = np.zeros(self._H.shape[1])
         self._dissipation_form = SymmetricQuadraticForm(self.C)
         self._set_dt(dt)
+
+    @property
+    def K(self) -> sp.csr_matrix:
+        """The stiffness (n, n) N/m; formed from the split on first use if not given."""
+        if self._K is None:
+            self._K = formed(*self._stiffness_split)
+        return self._K
+
+    def _K_block(self, rows: np.ndarray) -> sp.csr_matrix:
+        """K[rows][:, prescribed], from the split when there is one (K_el's rows hold one
+        ring of nodes, K's two)."""
+        c = self.prescribed
+        if self._stiffness_split is None:
+            return self.K[rows][:, c]
+        K_el, G, w = self._stiffness_split
+        G = sp.csc_matrix(G)
+        return (K_el[rows][:, c] + G[:, rows].T @ sp.diags(w) @ G[:, c]).tocsr()
+
+    def _K_times(self, d: np.ndarray) -> np.ndarray:
+        """K d (n,) N for d (n,) m, from the split when there is one."""
+        if self._stiffness_split is None:
+            return self.K @ d
+        K_el, G, w = self._stiffness_split
+        return K_el @ d + G.T @ (w * (G @ d))
 
     def _set_dt(self, dt: float) -> None:
         self.dt = float(dt)
@@ -166,7 +195,7 @@ class Newmark:
         """Free-DOF accelerations from M a = f - K d - C v (prescribed ones kept); in place."""
         u = self.free
         r = (
-            -(self.K @ state.d + self.C @ state.v)
+            -(self._K_times(state.d) + self.C @ state.v)
             - self.M[:, self.prescribed] @ state.a[self.prescribed]
         )
         if f is not None:
@@ -196,7 +225,7 @@ class Newmark:
         that the end points miss) acts through the inertial and viscous coupling
         (4/h^2) M_uc + (2/h) C_uc; through K_uc the free DOFs follow the exact end points.
         """
-        x, n, c, h = np.zeros_like(self._x), self.K.shape[0], self.prescribed, self.dt
+        x, n, c, h = np.zeros_like(self._x), self.M.shape[0], self.prescribed, self.dt
         x[self.free] = -delta_a / 3.0
         x[c] = (4.0 / h**2) * defect_c
         x[n + c] = (2.0 / h) * defect_c

@@ -87,7 +87,7 @@ class FemProblem:
     def drive_energy(self, model: FemModel) -> float:
         """Energy scale of the drive, J (:meth:`BoundaryConditions.drive_energy`, or the
         actuation's :meth:`~physanim.fem.actuation.Actuation.energy_scale` if larger)."""
-        energy = self.conditions.drive_energy(model.K)
+        energy = self.conditions.drive_energy(model.stiffness_diagonal())
         if self.actuation is not None:
             energy = max(energy, self.actuation.energy_scale(model))
         return energy

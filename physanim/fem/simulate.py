@@ -146,10 +146,11 @@ def simulate_problem(
     n_frames, pres = bc.n_frames, bc.prescribed_dofs
 
     most_threads = numba.get_num_threads()
-    probe_op, probe = ParallelCSR(model.K), np.ones(model.n_dofs)
+    probe_op, probe = ParallelCSR(model.K_el), np.ones(model.n_dofs)
     faster_thread_count(lambda: probe_op @ probe, most_threads, repeats=5)
     t0 = time.perf_counter()
-    stiffness, split = bc.with_springs(model.K, model.split)
+    # with the split the integrator forms K only if its solver needs it
+    stiffness, split = bc.with_springs(None if model.split else model.K, model.split)
     with threadpool_limits(limits=numba.get_num_threads(), user_api="blas"):  # CHOLMOD's too
         integ = kin.integrator(stiffness, split, frame_dt / levels[0], pres)
     integrators = IntegratorCache(integ, levels[0], frame_dt, params.factor_cache)
@@ -159,7 +160,7 @@ def simulate_problem(
         integrators, levels, bc, force, params.error_tol_mm * 1e-3, params.error_estimate
     )
 
-    state = initial_state(integ, stiffness, bc, force, params.solver)
+    state = initial_state(integ, bc, force, params.solver)
 
     out = np.zeros((n_frames, n_nodes, 3), dtype=np.float32)
     energy = EnergyMonitor(

@@ -36,7 +36,6 @@ import time
 from collections import OrderedDict
 
 import numpy as np
-import scipy.sparse as sp
 
 from physanim.fem.boundary import BoundaryConditions, FrameForce
 from physanim.fem.newmark import Newmark, State
@@ -58,23 +57,19 @@ def substep_levels(frame_dt: float, params: SimulateParams, adaptive_ok: bool) -
 
 
 def initial_state(
-    integ: Newmark,
-    stiffness: sp.csr_matrix,
-    bc: BoundaryConditions,
-    force: FrameForce | None,
-    solver: str,
+    integ: Newmark, bc: BoundaryConditions, force: FrameForce | None, solver: str
 ) -> State:
-    """The state at frame 0: static equilibrium (``stiffness`` (n, n) N/m) for the first
+    """The state at frame 0: static equilibrium (``integ``'s stiffness) for the first
     prescribed displacements and applied forces (springs, actuation), the prescribed velocity
     and acceleration, and the free DOFs' acceleration from the equation of motion when
     anything moves."""
-    n_dofs, pres = stiffness.shape[0], bc.prescribed_dofs
+    n_dofs, pres = integ.M.shape[0], bc.prescribed_dofs
     state = State.rest(n_dofs)
     d_c, v_c, a_c = (x[0] for x in bc.prescribed(np.zeros(1)))
     f0 = None if force is None else force.full(0.0, n_dofs)
     loaded = f0 is not None and bool(np.any(f0))
     if np.any(d_c) or loaded:
-        state.d[:] = solve_static(stiffness, pres, d_c, f0, solver=solver)
+        state.d[:] = solve_static(integ.K, pres, d_c, f0, solver=solver)
     state.v[pres], state.a[pres] = v_c, a_c
     if np.any(v_c) or np.any(a_c) or loaded:
         integ.initial_acceleration(state, f0)
