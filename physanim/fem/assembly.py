@@ -86,9 +86,18 @@ def _element_blocks(B, volumes, D, out):
 def assemble(blocks: np.ndarray, tets: np.ndarray, n_nodes: int) -> sp.csr_matrix:
     """Sum element blocks (M, 12, 12) into a sparse (3N, 3N) CSR matrix (sorted indices)."""
     indptr, indices, slots = _block_pattern(np.ascontiguousarray(tets), n_nodes)
-    data = np.bincount(slots, weights=blocks.ravel(), minlength=len(indices))
+    data = np.zeros(len(indices))
+    _scatter_add(slots, np.ascontiguousarray(blocks, np.float64).reshape(-1), data)
     n = 3 * n_nodes
     return sp.csr_matrix((data, indices, indptr), shape=(n, n))
+
+
+# np.bincount's weighted sum took 0.25 s per matrix on a 2 mm demo mesh (22M entries)
+@njit(cache=True)
+def _scatter_add(slots, values, out):
+    """out[slots[i]] += values[i] for every i."""
+    for i in range(len(slots)):
+        out[slots[i]] += values[i]
 
 
 # K, M and C of a mesh share one pattern: it is found once per mesh, from the node pairs

@@ -23,7 +23,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from physanim.fem.geometry import node_dofs
-from physanim.fem.interp import catmull_rom, tangents
+from physanim.fem.interp import catmull_rom, catmull_rom_position, tangents
 from physanim.mesh.seam import NONE
 
 
@@ -101,7 +101,7 @@ class FrameForce:
 
     def at(self, times: NDArray) -> NDArray:
         """(len(times), K) forces on ``dofs``, N."""
-        return catmull_rom(self.values, self.frame_dt, times, self._tangents)[0]
+        return catmull_rom_position(self.values, self.frame_dt, times, self._tangents)
 
     def free(self, times: NDArray) -> NDArray:
         """(len(times), n_free) forces on the free DOFs, N."""

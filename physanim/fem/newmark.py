@@ -98,8 +98,6 @@ class Newmark:
             raise ValueError("precision 'mixed' needs solver 'pardiso' or 'cholmod'")
         self.precision = precision if factored else "float64"
         u = self.free
-        sub = lambda X: X[u][:, u]  # noqa: E731
-        self._M_uu = sub(self.M)  # on its own pattern: initial accelerations
         self._split = None
         if split is not None and (
             self.solver == "pardiso" or (self.solver == "cholmod" and not optimized_blas())
@@ -111,7 +109,10 @@ class Newmark:
             stiffness = self.K
         # A(dt) = K_uu + (4/dt^2) M_uu + (2/dt) C_uu (with the split: A_el, K_el in place of
         # K, and A_uu = A_el + G^T diag(w) G is never formed): values on one pattern
-        self._pattern, self._kmc = _common_pattern(sub(stiffness), self._M_uu, sub(self.C))
+        self._pattern, self._kmc = _free_blocks(u, sp.csr_matrix(stiffness), self.M, self.C)
+        self._M_uu = sp.csr_matrix(  # initial accelerations
+            (self._kmc[1], self._pattern.indices, self._pattern.indptr), self._pattern.shape
+        )
         self._factors: CholmodFactors | PardisoFactors | None = None
         dtype = np.float64 if precision == "float64" else np.float32
         if self.solver == "cholmod":
@@ -120,8 +121,7 @@ class Newmark:
         elif self.solver == "pardiso":
             self._factors = PardisoFactors("spd" if self._split is None else "indefinite", dtype)
         # rhs_u = [M_u: | C_u: | K_uc] @ [x_m; x_c; -d_c] in a single sparse product
-        rows = lambda X: X[u]  # noqa: E731
-        self._H = ParallelCSR(sp.hstack([rows(self.M), rows(self.C), self._K_block(u)]))
+        self._H = ParallelCSR(_side_by_side(self.M[u], self.C[u], self._K_block(u)))
         self._x = np.zeros(self._H.shape[1])
         self._dissipation_form = SymmetricQuadraticForm(self.C)
         self._set_dt(dt)
@@ -293,6 +293,50 @@ def _advance(d, v, a, u, d_u, dt):
         v[i] += 0.5 * dt * (a[i] + a_new)
         a[i] = a_new
         d[i] = d_u[k]
+
+
+def _free_blocks(u: np.ndarray, *mats: sp.csr_matrix) -> tuple[sp.csc_matrix, list[np.ndarray]]:
+    """:func:`_common_pattern` of the blocks X[u][:, u] (``u`` sorted) of symmetric CSR
+    matrices. When they share one pattern (K_el, M and C assembled on one mesh) the block is
+    cut once, from the entries' numbers, and picks every matrix's values (three cuts took
+    0.3 s and their merge 0.4 s on a 2 mm demo mesh)."""
+    first = mats[0]
+    shared = all(
+        X.shape == first.shape
+        and X.has_canonical_format
+        and np.array_equal(X.indptr, first.indptr)
+        and np.array_equal(X.indices, first.indices)
+        for X in mats
+    )
+    if not shared:
+        return _common_pattern(*(X[u][:, u] for X in mats))
+    numbers = sp.csr_matrix(
+        (np.arange(1.0, first.nnz + 1), first.indices, first.indptr), shape=first.shape
+    )[u][:, u]
+    numbers.sort_indices()
+    pick = numbers.data.astype(np.int64) - 1
+    pattern = sp.csc_matrix(
+        (np.ones(len(pick)), numbers.indices, numbers.indptr), shape=numbers.shape
+    )
+    return pattern, [X.data[pick] for X in mats]
+
+
+def _side_by_side(*mats: sp.csr_matrix) -> sp.csr_matrix:
+    """[A | B | ...] of CSR matrices with the same rows, each row's entries in their order
+    (scipy's hstack goes through COO: 0.4 s for the step's right-hand-side operator on a
+    2 mm demo mesh)."""
+    n = mats[0].shape[0]
+    counts = np.stack([np.diff(X.indptr) for X in mats])  # (k, n) entries per row
+    indptr = np.r_[0, np.cumsum(counts.sum(axis=0))]
+    before = np.cumsum(counts, axis=0) - counts  # the earlier matrices' entries in each row
+    indices, data = np.empty(indptr[-1], np.int64), np.empty(indptr[-1])
+    offset = 0
+    for X, b in zip(mats, before, strict=True):
+        row = np.repeat(np.arange(n), np.diff(X.indptr))
+        at = indptr[row] + b[row] + np.arange(X.nnz) - X.indptr[row]
+        indices[at], data[at] = X.indices + offset, X.data
+        offset += X.shape[1]
+    return sp.csr_matrix((data, indices, indptr), shape=(n, offset))
 
 
 def _common_pattern(*mats: sp.csr_matrix) -> tuple[sp.csc_matrix, list[np.ndarray]]:

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from physanim.fem.actuation import Actuation
 from physanim.fem.boundary import BoundaryConditions, FrameForce
-from physanim.fem.interp import catmull_rom
+from physanim.fem.interp import catmull_rom_position
 from physanim.fem.linsolve import factorize
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import FemModel
@@ -259,7 +259,7 @@ def _projected_load(force: FrameForce | None, phi_force: NDArray | None, times: 
         return 0.0 * times[:, None]
     # the spline is linear in its values: project the frames' forces, then interpolate
     # (r columns, not the free DOFs': 0.8 s less on a 2 mm demo mesh)
-    return catmull_rom(force.values @ phi_force, force.frame_dt, times)[0]
+    return catmull_rom_position(force.values @ phi_force, force.frame_dt, times)
 
 
 def _monitored(

@@ -136,3 +136,23 @@ def test_solvers_split_the_anp_matrix_where_it_pays(slow_blas, monkeypatch):
     assert (cholmod._split is not None) == slow_blas
     if has_pardiso():
         assert auto._split is not None
+
+
+def test_free_blocks_and_side_by_side_match_scipys_slicing():
+    """The integrator's matrices: the free-DOF blocks of matrices on one pattern cut once
+    (and of matrices on different patterns, merged), and [A | B | C] built row by row, equal
+    scipy's own slicing and hstack (the blocks as CSC from CSR arrays: the transpose, equal
+    for these symmetric matrices up to round-off)."""
+    import scipy.sparse as sp
+
+    model, fixed, _ = _cantilever(eta=1.0)
+    free = np.setdiff1d(np.arange(model.n_dofs), fixed)
+    lumped = sp.diags(np.asarray(model.M.sum(axis=1)).ravel(), format="csr")  # its own pattern
+    for mats in ((model.K_el, model.M, model.C), (model.K_el, lumped, model.C)):
+        pattern, values = newmark_module._free_blocks(free, *mats)
+        for X, v in zip(mats, values, strict=True):
+            got = sp.csc_matrix((v, pattern.indices, pattern.indptr), shape=pattern.shape)
+            np.testing.assert_array_equal(got.toarray(), X[free][:, free].T.toarray())
+    rows = [model.M[free], model.C[free], model.K[free][:, fixed]]
+    got = newmark_module._side_by_side(*rows)
+    np.testing.assert_array_equal(got.toarray(), sp.hstack(rows).toarray())

@@ -5,7 +5,7 @@ import pytest
 from fem_meshes import box_mesh
 
 from physanim.fem.geometry import node_dofs
-from physanim.fem.interp import catmull_rom
+from physanim.fem.interp import catmull_rom, catmull_rom_position
 from physanim.fem.materials import TetMaterials
 from physanim.fem.params import SimulateParams
 from physanim.fem.simulate import simulate
@@ -30,6 +30,10 @@ def test_catmull_rom_interpolates_and_differentiates():
     np.testing.assert_allclose(vel, np.stack([np.full_like(s, 3), 2 * s], axis=1), atol=1e-10)
     np.testing.assert_allclose(acc[:, 1], 2, atol=1e-8)
     np.testing.assert_allclose(catmull_rom(values, h, t)[0], values, atol=1e-12)
+    wiggly = np.random.default_rng(0).normal(size=(6, 3))  # the position alone is the same
+    np.testing.assert_allclose(
+        catmull_rom_position(wiggly, h, s), catmull_rom(wiggly, h, s)[0], rtol=1e-14, atol=1e-15
+    )
 
 
 def test_drive_defect_is_the_trapezoidal_rules_error_on_the_path():
