@@ -52,7 +52,6 @@ class Element(ABC):
     @abstractmethod
     def stiffness(
         self,
-        B: np.ndarray,
         grads: np.ndarray,
         volumes: np.ndarray,
         tets: np.ndarray,
@@ -60,8 +59,8 @@ class Element(ABC):
         mu: np.ndarray,
         kappa: np.ndarray,
     ) -> Stiffness:
-        """Stiffness from strain-displacement B (M, 6, 12), shape gradients (M, 4, 3) 1/m,
-        volumes (M,) m^3, tets (M, 4) and shear / bulk moduli mu, kappa (M,) Pa."""
+        """Stiffness from shape gradients (M, 4, 3) 1/m, volumes (M,) m^3, tets (M, 4) and
+        shear / bulk moduli mu, kappa (M,) Pa."""
 
 
 class PlainTet(Element):
@@ -69,8 +68,9 @@ class PlainTet(Element):
 
     name = "p1"
 
-    def stiffness(self, B, grads, volumes, tets, n_nodes, mu, kappa) -> Stiffness:
-        k_blocks = element_blocks(B, volumes, deviatoric_matrix(mu) + volumetric_matrix(kappa))
+    def stiffness(self, grads, volumes, tets, n_nodes, mu, kappa) -> Stiffness:
+        D = deviatoric_matrix(mu) + volumetric_matrix(kappa)
+        k_blocks = element_blocks(grads, volumes, D)
         return Stiffness(K_el=assemble(k_blocks, tets, n_nodes), k_blocks=k_blocks)
 
 
@@ -80,8 +80,8 @@ class AveragedNodalPressureTet(Element):
 
     name = "anp"
 
-    def stiffness(self, B, grads, volumes, tets, n_nodes, mu, kappa) -> Stiffness:
-        k_blocks = element_blocks(B, volumes, deviatoric_matrix(mu))
+    def stiffness(self, grads, volumes, tets, n_nodes, mu, kappa) -> Stiffness:
+        k_blocks = element_blocks(grads, volumes, deviatoric_matrix(mu))
         K_el = assemble(k_blocks, tets, n_nodes)
         S = nodal_average(tets, volumes, n_nodes)
         G = nodal_divergence(grads, tets, S)

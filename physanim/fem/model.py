@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-from physanim.fem.assembly import assemble, element_blocks, mass_matrix, strain_displacement
+from physanim.fem.assembly import assemble, element_blocks, mass_matrix
 from physanim.fem.elements import ELEMENTS, Element, formed
 from physanim.fem.geometry import element_dofs, shape_gradients
 from physanim.fem.laws import MaterialLaw
@@ -119,10 +119,9 @@ def build_model(
     grads, vol = shape_gradients(nodes, tets)
     mat = materials.validated(len(tets), law.tet_fields)
     n = len(nodes)
-    B = strain_displacement(grads)
     mu, kappa = law.moduli(mat)
-    stiff = element.stiffness(B, grads, vol, tets, n, mu, kappa)
-    c_blocks = element_blocks(B, vol, law.viscosity(mat))
+    stiff = element.stiffness(grads, vol, tets, n, mu, kappa)
+    c_blocks = element_blocks(grads, vol, law.viscosity(mat))
     return FemModel(
         nodes=nodes,
         tets=tets,

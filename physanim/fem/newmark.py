@@ -328,15 +328,23 @@ def _side_by_side(*mats: sp.csr_matrix) -> sp.csr_matrix:
     n = mats[0].shape[0]
     counts = np.stack([np.diff(X.indptr) for X in mats])  # (k, n) entries per row
     indptr = np.r_[0, np.cumsum(counts.sum(axis=0))]
-    before = np.cumsum(counts, axis=0) - counts  # the earlier matrices' entries in each row
     indices, data = np.empty(indptr[-1], np.int64), np.empty(indptr[-1])
-    offset = 0
-    for X, b in zip(mats, before, strict=True):
-        row = np.repeat(np.arange(n), np.diff(X.indptr))
-        at = indptr[row] + b[row] + np.arange(X.nnz) - X.indptr[row]
-        indices[at], data[at] = X.indices + offset, X.data
+    at, offset = indptr[:-1].copy(), 0  # where each row's next entries go
+    for X in mats:
+        _append_rows(X.indptr, X.indices, X.data, offset, at, indices, data)
         offset += X.shape[1]
     return sp.csr_matrix((data, indices, indptr), shape=(n, offset))
+
+
+@njit(cache=True)
+def _append_rows(indptr, indices, data, offset, at, out_indices, out_data):
+    """Each row's entries of one CSR matrix, columns shifted by ``offset``, written from
+    at[row] on (advanced past them)."""
+    for i in range(len(indptr) - 1):
+        for k in range(indptr[i], indptr[i + 1]):
+            out_indices[at[i]] = indices[k] + offset
+            out_data[at[i]] = data[k]
+            at[i] += 1
 
 
 def _common_pattern(*mats: sp.csr_matrix) -> tuple[sp.csc_matrix, list[np.ndarray]]:
