@@ -121,8 +121,13 @@ class Newmark:
         elif self.solver == "pardiso":
             self._factors = PardisoFactors("spd" if self._split is None else "indefinite", dtype)
         # rhs_u = [M_u: | C_u: | K_uc] @ [x_m; x_c; -d_c] in a single sparse product
-        self._H = ParallelCSR(_side_by_side(self.M[u], self.C[u], self._K_block(u)))
+        M_u, C_u = self.M[u], self.C[u]
+        self._H = ParallelCSR(_side_by_side(M_u, C_u, self._K_block(u)))
         self._x = np.zeros(self._H.shape[1])
+        # the error's right-hand side: [M_u: | C_uc] @ [x_m; x_c on the prescribed DOFs], a
+        # quarter of H's stored entries (its C_u: block is the largest, the mass's 3x3
+        # blocks store only their diagonals)
+        self._E = ParallelCSR(_side_by_side(M_u, C_u[:, self.prescribed]))
         self._dissipation_form = SymmetricQuadraticForm(self.C)
         self._set_dt(dt)
 
@@ -225,11 +230,12 @@ class Newmark:
         that the end points miss) acts through the inertial and viscous coupling
         (4/h^2) M_uc + (2/h) C_uc; through K_uc the free DOFs follow the exact end points.
         """
-        x, n, c, h = np.zeros_like(self._x), self.M.shape[0], self.prescribed, self.dt
+        n, c, h = self.M.shape[0], self.prescribed, self.dt
+        x = np.zeros(self._E.shape[1])
         x[self.free] = -delta_a / 3.0
         x[c] = (4.0 / h**2) * defect_c
-        x[n + c] = (2.0 / h) * defect_c
-        return self._H @ x
+        x[n:] = (2.0 / h) * defect_c
+        return self._E @ x
 
     def step(
         self,
