@@ -61,7 +61,9 @@ def worker(stage: str, args: list[str]) -> None:
 def run_stage(stage: str, args: list[str]) -> dict[str, Any]:
     """One stage in a fresh process: its wall time (s) and key, peak memory."""
     cmd = [sys.executable, __file__, "--worker", stage, "--", *args]
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    from cli import PROCESS_ENV  # the command's own settings: this module imports numpy first
+
+    env = {**PROCESS_ENV, **os.environ, "PYTHONPATH": str(ROOT)}
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=env, check=False)
     if done.returncode:
         raise RuntimeError(f"{stage} {args} failed:\n{done.stdout[-2000:]}{done.stderr[-3000:]}")

@@ -7,8 +7,10 @@ local one, ``flows.executors``' Prefect and Dask ones). ``python -m cli`` runs i
 
 import os
 
-# Before numpy is imported (numpy reads it once): no transparent-huge-page advice for numpy's
-# arrays. On the two-core VMs this project is measured on, the huge-page faults of a 2 mm
-# mesh's setup arrays made `simulate` 18.0-21.4 s against 17.9-18.3 s without, the stepping
-# alike; a user's own setting is kept.
-os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
+#: Environment of the command's processes, set before numpy is imported (numpy reads it once)
+#: unless the user set it: no transparent-huge-page advice for numpy's arrays. On the two-core
+#: VMs this project is measured on, the huge-page faults of a 2 mm mesh's setup arrays made
+#: `simulate` 18.0-21.4 s against 17.9-18.3 s without, the stepping alike.
+PROCESS_ENV = {"NUMPY_MADVISE_HUGEPAGE": "0"}
+for _name, _value in PROCESS_ENV.items():
+    os.environ.setdefault(_name, _value)
