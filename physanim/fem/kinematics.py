@@ -10,6 +10,7 @@ from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit, prange
 
 from physanim.fem.corotational import (
     CorotationalNewmark,
@@ -62,7 +63,9 @@ class Linear:
         return Newmark(stiffness, m.M, m.C, dt, prescribed, p.solver, split, p.precision)
 
     def element_displacements(self, d: np.ndarray) -> np.ndarray:
-        return d[self.model.dofs]
+        out = np.empty(self.model.dofs.shape)
+        _gather(np.ascontiguousarray(d, np.float64), self.model.dofs, out)
+        return out
 
     def strain_energy(self, d: np.ndarray, u_elem: np.ndarray) -> float:
         energy = self._strain(d)
@@ -98,3 +101,13 @@ class Corotational:
 def kinematics(model: FemModel, params: SimulateParams) -> Kinematics:
     """The kinematics ``params.corotational`` asks for."""
     return (Corotational if params.corotational else Linear)(model, params)
+
+
+# d[dofs] on numba's threads, once per output frame: numpy's gather took 3.4 ms on a 2 mm demo
+# mesh (150k tets)
+@njit(cache=True, parallel=True)
+def _gather(d, dofs, out):
+    """out (M, 12) = d[dofs] for element DOFs dofs (M, 12)."""
+    for e in prange(dofs.shape[0]):
+        for j in range(dofs.shape[1]):
+            out[e, j] = d[dofs[e, j]]

@@ -127,6 +127,9 @@ class FrameStepper:
         #: and those of the frame last estimated, made the former when it is accepted
         self._a_before: np.ndarray | None = None
         self._a_last: np.ndarray | None = None
+        #: the last ``_drive`` made, by (frame, substeps): the next frame's first substep
+        #: reads it, then that frame's steps
+        self._last_drive: tuple[tuple[int, int], tuple[np.ndarray, ...]] | None = None
 
     @property
     def adaptive(self) -> bool:
@@ -134,11 +137,16 @@ class FrameStepper:
 
     def _drive(self, k: int, n_sub: int) -> tuple[np.ndarray, ...]:
         """The times (n_sub,) s of the substeps from frame k - 1 to frame k, the prescribed
-        d, v, a (n_sub, n_c) and applied forces (n_sub, n_free) or None at them."""
+        d, v, a (n_sub, n_c) and applied forces (n_sub, n_free) or None at them (read-only:
+        the same arrays are handed out again)."""
+        if self._last_drive is not None and self._last_drive[0] == (k, n_sub):
+            return self._last_drive[1]
         h = self.bc.frame_dt / n_sub
         times = (k - 1) * self.bc.frame_dt + h * np.arange(1, n_sub + 1)
         dd, vv, aa = self.bc.prescribed(times)
-        return times, dd, vv, aa, None if self.force is None else self.force.free(times)
+        drive = times, dd, vv, aa, None if self.force is None else self.force.free(times)
+        self._last_drive = ((k, n_sub), drive)
+        return drive
 
     def advance(
         self,
