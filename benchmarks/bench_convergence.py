@@ -13,7 +13,8 @@ between the two finest uniform meshes. The skin surface fed to fTetWild is the s
 remesh at every size, so the meshes discretise one geometry.
 
 Run: .venv/bin/python benchmarks/bench_convergence.py [--sizes-mm 4 3 2.5 2 1.5] [--no-refined]
-     [--plot docs/convergence.png]
+     [--plot docs/convergence.png]; ``--pooled 3`` measures nothing and prints the comparisons
+     over the last three recorded runs' meshes together.
 Uses data/demo's store (each mesh is cached there like any run; ``physanim clean`` drops them).
 """
 
@@ -29,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from results import Table, describe, record  # benchmarks/results.py, beside this script
+from results import RESULTS_DIR, Table, describe, load, record  # benchmarks/results.py
 
 ROOT = Path(__file__).resolve().parents[1]
 PHYSANIM = [sys.executable, "-m", "cli"]  # the physanim command of this interpreter
@@ -186,7 +187,26 @@ def tables_of(rows: list[dict[str, Any]]) -> list[Table]:
             "inverted_tets")  # fmt: skip
     tables = [Table("meshes", ["mesh", *cost, *FIGURES], [[r["mesh"], *(r[c] for c in cost),
                     *(r[f] for f in FIGURES)] for r in rows])]  # fmt: skip
-    mean = means(rows)
+    tables += spread_and_change(rows)
+    sizes = sorted(means(rows))
+    if len(sizes) >= 2:
+        first = [next(r for r in rows if r["h_mm"] == h) for h in sizes]  # one mesh a size
+        nodes = [r["nodes"] for r in first]
+        growth = [[c, exponent(nodes, [r[c] for r in first])] for c in
+                  ("factor_entries", "factorization_s", "step_ms", "simulate_s", "actuate_s",
+                   "tetra_s", "simulate_peak_gb", "actuate_peak_gb")]  # fmt: skip
+        tables.append(Table("growth against nodes", ["cost", "exponent"], growth,
+                            notes="cost ~ nodes^exponent over the uniform meshes"))  # fmt: skip
+    regions = [[r["mesh"], name, *q.values()] for r in rows for name, q in r["regions"].items()]
+    tables.append(Table("tets per region", ["mesh", "region", "tets", "median_edge_mm",
+                                            "min_dihedral_deg"], regions))  # fmt: skip
+    return tables + refined_against_2mm(rows)
+
+
+def spread_and_change(rows: list[dict[str, Any]]) -> list[Table]:
+    """fTetWild's spread at the sizes meshed more than once, and the change of each figure
+    between the two finest sizes (means over their meshes)."""
+    tables, mean = [], means(rows)
     repeated = [h for h in mean if sum(r["h_mm"] == h for r in rows) > 1]
     if repeated:
         tables.append(Table("spread between fTetWild meshes of one size",
@@ -202,26 +222,48 @@ def tables_of(rows: list[dict[str, Any]]) -> list[Table]:
                             f"spread_{fine:g}mm_pct"], change,
                             notes="convergence target: below 2 %; means over each size's "
                             "meshes"))  # fmt: skip
-        first = [next(r for r in rows if r["h_mm"] == h) for h in sizes]  # one mesh a size
-        nodes = [r["nodes"] for r in first]
-        growth = [[c, exponent(nodes, [r[c] for r in first])] for c in
-                  ("factor_entries", "factorization_s", "step_ms", "simulate_s", "actuate_s",
-                   "tetra_s", "simulate_peak_gb", "actuate_peak_gb")]  # fmt: skip
-        tables.append(Table("growth against nodes", ["cost", "exponent"], growth,
-                            notes="cost ~ nodes^exponent over the uniform meshes"))  # fmt: skip
-    regions = [[r["mesh"], name, *q.values()] for r in rows for name, q in r["regions"].items()]
-    tables.append(Table("tets per region", ["mesh", "region", "tets", "median_edge_mm",
-                                            "min_dihedral_deg"], regions))  # fmt: skip
-    if 2.0 in mean:  # the issue's 2 mm mesh
-        ref = [r for r in rows if r["h_mm"] == 2.0]
-        for refined in (r for r in rows if r["h_mm"] is None):
-            tables.append(Table(f"{refined['mesh']} against 2 mm", ["figure", "change_pct",
-                                "spread_2mm_pct"],
-                                [[f, 100 * abs(refined[f] / mean[2.0][f] - 1),
-                                  spread(rows, 2.0)[f]] for f in FIGURES]
-                                + [["nodes_ratio", refined["nodes"] / float(np.mean(
-                                    [r["nodes"] for r in ref])), None]]))  # fmt: skip
     return tables
+
+
+def refined_against_2mm(rows: list[dict[str, Any]]) -> list[Table]:
+    """Each graded mesh's figures against the mean of the 2 mm meshes (the issue's)."""
+    mean = means(rows)
+    if 2.0 not in mean:
+        return []
+    ref = [r for r in rows if r["h_mm"] == 2.0]
+    return [Table(f"{refined['mesh']} against 2 mm", ["figure", "change_pct", "spread_2mm_pct"],
+                  [[f, 100 * abs(refined[f] / mean[2.0][f] - 1), spread(rows, 2.0)[f]]
+                   for f in FIGURES]
+                  + [["nodes_ratio", refined["nodes"] / float(np.mean([r["nodes"] for r in ref])),
+                      None]]) for refined in rows if refined["h_mm"] is None]  # fmt: skip
+
+
+def pooled(n_runs: int) -> None:
+    """Print the comparisons over the meshes of the last ``n_runs`` recorded runs together
+    (each run meshes every size afresh: more meshes a size than one run affords), the graded
+    meshes pooled as one."""
+    runs = load(RESULTS_DIR / "bench_convergence.json")["runs"][-n_runs:]
+    rows = []
+    for run in runs:
+        table = next(t for t in run["tables"] if t["name"] == "meshes")
+        for cells in table["rows"]:
+            row = dict(zip(table["columns"], cells, strict=True))
+            size = row["mesh"].split(" mm")[0]
+            row["h_mm"] = float(size) if size.replace(".", "").isdigit() else None
+            rows.append(row)
+    graded = [r for r in rows if r["h_mm"] is None]
+    if graded:
+        rows = [r for r in rows if r["h_mm"] is not None]
+        rows.append({"mesh": f"refined ({len(graded)} meshes)", "h_mm": None,
+                     "nodes": float(np.mean([r["nodes"] for r in graded])),
+                     **{f: float(np.mean([r[f] for r in graded])) for f in FIGURES}})  # fmt: skip
+    dates = f"{runs[0]['date']} to {runs[-1]['date']}"
+    print(
+        f"pooled over {len(runs)} runs ({dates}): "
+        + ", ".join(f"{h:g} mm x{sum(r['h_mm'] == h for r in rows)}" for h in sorted(means(rows)))
+    )
+    for t in spread_and_change(rows) + refined_against_2mm(rows):
+        print(f"\n{t.name}\n" + "\n".join(str(row) for row in [t.columns, *t.rows]))
 
 
 def main() -> None:
@@ -233,7 +275,13 @@ def main() -> None:
     parser.add_argument("--no-refined", action="store_true", help="skip the regional mesh")
     parser.add_argument("--plot", type=Path, default=ROOT / "docs" / "convergence.png")
     parser.add_argument("--label", default="uniform 4-1.5 mm, 2 mm three times, refined")
+    parser.add_argument("--pooled", type=int, metavar="RUNS",
+                        help="measure nothing: print the comparisons over the meshes of the "
+                        "last RUNS recorded runs together")  # fmt: skip
     args = parser.parse_args()
+    if args.pooled:
+        pooled(args.pooled)
+        return
     meshes = []
     for h in sorted(args.sizes_mm, reverse=True):
         n = args.repeats if h in args.repeat_mm else 1
