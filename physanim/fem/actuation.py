@@ -265,7 +265,7 @@ class Actuation:
 
 # f_a = -V_e B_e^T sigma_a,e per tet and frame, one frame per thread (no two threads add into
 # one row) reading the shape gradients (12 numbers per tet) rather than B (72): on a 2 mm demo
-# mesh (150k tets, 90 frames) 0.1 s where the force matrix and its product took 1.2 s
+# mesh (150k tets, 90 frames) 0.8-0.9 s where the force matrix and its product took 1.8-2.1 s
 @njit(cache=True, parallel=True)
 def _active_forces(w_indptr, w_indices, w_data, coef, directions, grads, volumes, tets, out):
     """out (T, 3N) += the nodal forces of the stresses weights @ (coef[t] @ directions)."""
