@@ -1,7 +1,9 @@
 """Per-frame monitors of an FEM run: energy (and blow-up), elastic stress, inverted tets.
 
 Each monitor is called once per output frame with the frame's state and element
-displacements, and holds its (T,) series for :class:`physanim.fem.simulate.SimResult`.
+displacements, and holds its (T,) series for :class:`physanim.fem.simulate.SimResult`. A run
+rewound to an earlier frame (``FrameStepper.redo``) records the frames from it again: what a
+monitor holds for frame k depends only on frames 0..k as last recorded.
 """
 
 from __future__ import annotations
@@ -33,8 +35,6 @@ class EnergyMonitor:
         self._kin = kin
         self.kinetic, self.strain, self.dissipated = (np.zeros(n_frames) for _ in range(3))
         self.drive_energy, self.blowup_factor = drive_energy, blowup_factor
-        self._heat = 0.0
-        self._e_max: float | None = None
 
     def record(self, k: int, state: State, u_elem: np.ndarray) -> None:
         self.kinetic[k] = 0.5 * self._kinetic_form(state.v)
@@ -46,11 +46,9 @@ class EnergyMonitor:
         ``displacements`` (N, 3) m)."""
         energy = self.kinetic[k] + self.strain[k]
         if k == 0:
-            self._e_max = energy
             return
-        self._heat += heat
-        self.dissipated[k] = self._heat
-        scale = max(self._e_max, self.drive_energy)
+        self.dissipated[k] = self.dissipated[k - 1] + heat
+        scale = max((self.kinetic[:k] + self.strain[:k]).max(), self.drive_energy)
         if energy > self.blowup_factor * scale and energy > 0:
             node = int(np.linalg.norm(displacements, axis=1).argmax())
             raise SimulationDiverged(
@@ -59,7 +57,6 @@ class EnergyMonitor:
                 f"{scale:.3e} J; largest displacement "
                 f"{np.linalg.norm(displacements, axis=1).max():.3e} m at node {node}"
             )
-        self._e_max = max(self._e_max, energy)
 
 
 class StressMonitor:
@@ -80,13 +77,15 @@ class InversionMonitor:
     def __init__(self, model: FemModel, n_frames: int) -> None:
         self.model = model
         self.count = np.zeros(n_frames, dtype=np.int64)
-        self._seen: set[int] = set()
+        self._inverted: dict[int, np.ndarray] = {}  # frame -> its inverted tets, where any
 
     def record(self, k: int, state: State, u_elem: np.ndarray) -> None:
         m = self.model
         bad = np.flatnonzero(signed_volumes(m.nodes + state.d.reshape(-1, 3), m.tets) <= 0)
         self.count[k] = bad.size
-        self._seen.update(bad.tolist())
+        self._inverted.pop(k, None)
+        if bad.size:
+            self._inverted[k] = bad
 
     def tets(self) -> np.ndarray:
-        return np.array(sorted(self._seen), dtype=np.int64)
+        return np.unique(np.concatenate([np.zeros(0, np.int64), *self._inverted.values()]))

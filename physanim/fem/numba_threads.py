@@ -87,7 +87,10 @@ class ThreadTrials:
         return threads
 
     def finish(self, seconds: float, size: float = 1.0) -> None:
-        """Unit started last took ``seconds`` for ``size`` units of work (> 0)."""
+        """Unit started last took ``seconds`` for ``size`` units of work (0: its work is not
+        comparable to the others', and it is not counted)."""
+        if size <= 0:
+            return
         per_unit = seconds / size
         if not self._trial:
             self._recent.append(per_unit)

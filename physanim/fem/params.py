@@ -70,9 +70,10 @@ class SimulateParams(ModelParams):
         "Zienkiewicz-Xie's h^2/12 |a_(k+1) - a_k| over the frame's substeps (between "
         "substep-centred accelerations, blind to stiff modes' Nyquist ringing), filtered through "
         "the step's matrix and including the driven nodes' path between the substeps (one "
-        "more solve per frame); 'doubling' = the frame also computed in half the substeps "
-        "from the same state, |d_2n - d_n| / 3 (Richardson; half again as many solves and a "
-        "second factorisation)",
+        "more column per frame; at the coarsest step size up to 8 frames' columns are solved "
+        "together, the run rewound to a frame found over the tolerance); 'doubling' = the "
+        "frame also computed in half the substeps from the same state, |d_2n - d_n| / 3 "
+        "(Richardson; half again as many solves and a second factorisation)",
     )
     error_tol_mm: float = Field(
         0.05,

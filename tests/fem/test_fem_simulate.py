@@ -123,6 +123,36 @@ def test_adaptive_steps_match_the_fine_fixed_reference(estimate, precision):
     np.testing.assert_allclose(res.dissipated[-1], ref.dissipated[-1], rtol=0.02)
 
 
+def test_waiting_estimates_rewind_to_the_first_frame_over_the_tolerance(monkeypatch):
+    # a slow ramp lets estimates at the coarsest step size wait in batches (1, 2, 4, 8, 8:
+    # frames 16-23 wait together); a jump at frame 21, felt from frame 20 on through the
+    # drive's spline, fails frame 20's estimate inside that batch: the run rewinds there and
+    # refines it, and ends where the run that solves every estimate at once ends (the batched
+    # solve's round-off aside), frame for frame in the same substeps
+    import physanim.fem.stepping as stepping
+
+    nodes, tets, fixed, driven = _slab()
+    mat = TetMaterials.uniform(len(tets))
+    n_frames = 32
+    path = 1e-4 * np.arange(n_frames) / n_frames
+    path[21:] += 1e-3
+    traj = np.zeros((n_frames, len(driven), 3))
+    traj[:, :, 2] = path[:, None]
+    params = SimulateParams(dt=2.5e-4, error_tol_mm=1e-3, precision="float64")
+    waited = simulate(nodes, tets, mat, driven, traj, 1 / 30, fixed, params)
+    monkeypatch.setattr(stepping, "ERROR_BATCH", 1)
+    each = simulate(nodes, tets, mat, driven, traj, 1 / 30, fixed, params)
+    np.testing.assert_array_equal(waited.frame_substeps, each.frame_substeps)
+    steps = waited.frame_substeps
+    assert steps[1:19].max() == 1 and steps[20:22].min() >= 4  # refined at the jerk only
+    peak = np.abs(each.displacements).max()
+    np.testing.assert_allclose(waited.displacements, each.displacements, rtol=0, atol=1e-9 * peak)
+    np.testing.assert_allclose(waited.dissipated, each.dissipated, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(waited.strain, each.strain, rtol=1e-9, atol=1e-20)
+    # the frames stepped after frame 21 in its batch were discarded
+    assert waited.check_steps > each.check_steps and type(waited.check_steps) is int
+
+
 def test_stiff_modes_ringing_does_not_pass_a_frame_of_even_substeps():
     # A ramp that starts moving at t = 0 then holds: the tissue's stiff, overdamped modes ring
     # at the step's Nyquist rate (Newmark's amplification tends to -1 for omega h >> 1). A raw
