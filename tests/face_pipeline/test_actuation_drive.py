@@ -108,10 +108,11 @@ def test_a_material_edit_acts_through_the_held_actuation(actuated) -> None:
 
 
 def test_the_smile_gesture_raises_the_mouth_corners(actuated) -> None:
-    """``-c configs/gestures/smile_x1.5.yaml``: the mouth and cheek actuation x1.5, where the
-    fit's lip corner pullers are active, raises both mouth corners' displacement at the smile
-    peak (measured on the coarse demo: +36 and +32 %; at most +50 %, the jaw's and the other
-    regions' shares staying; asserted 25-60 %), and reuses the inverse step."""
+    """``-c configs/gestures/smile_x1.5.yaml``: the actuation of the mouth, the cheeks and
+    under the nose x1.5, where the fit's lip corner pullers are active, raises both mouth
+    corners' displacement at the smile peak (measured on the coarse demo: +43 and +40 %; at
+    most +50 %, the jaw's and the other regions' shares staying; asserted 35-60 %), and reuses
+    the inverse step."""
     data, _ = actuated
     gesture = "configs/gestures/smile_x1.5.yaml"
     ran = run(data, gesture)
@@ -125,4 +126,4 @@ def test_the_smile_gesture_raises_the_mouth_corners(actuated) -> None:
         at_smile[name] = evaluation["fem/displacement"][smile][corners]
     rise = at_smile["gesture"] / at_smile["held"] - 1.0
     print("mouth-corner rise at the smile peak", rise)
-    assert np.all((rise > 0.25) & (rise < 0.6)), rise
+    assert np.all((rise > 0.35) & (rise < 0.6)), rise
