@@ -107,5 +107,7 @@ class DenseParams(BaseModel):
         "with the head (the landmark tracker's pose is the start); bool",
     )
     workers: int = Field(
-        0, ge=0, le=64, description="threads computing flow (0: one per core); count"
-    )
+        0, ge=0, le=64,
+        description="threads computing flow: 1 computes each frame's two directions in turn, "
+        "2 or more both at once (0: one per core); count",
+    )  # fmt: skip

@@ -122,6 +122,57 @@ def test_unobserved_vertices_are_marked_and_filled_from_neighbours(recording):
     assert np.median(err[hole]) < 1e-3
 
 
+def test_each_frames_flow_starts_from_the_frame_befores_in_its_direction(recording, monkeypatch):
+    """Frame t's flow from the neutral frame (and back) starts from frame t - 1's in the same
+    direction, so a large motion is reached in steps (the held-out vowels rendered without
+    markers: 0.222 -> 0.199 at the jaw drop, benchmarks/bench_dense.py), and the starts do
+    not change a motion that DIS finds from rest (this warp: within 0.05 px, the median)."""
+    import physanim.tracking.dense as dense_module
+
+    color, depth, uv0, faces = recording
+    engine = dense_module._flow_engine
+    engines: list[Recorded] = []
+
+    class Recorded:
+        """A DIS engine that keeps each call's start and result; ``cold``: ignore starts."""
+
+        def __init__(self, dis: cv2.DISOpticalFlow, cold: bool) -> None:
+            self.dis, self.cold = dis, cold
+            self.calls: list[tuple[NDArray | None, NDArray]] = []
+            engines.append(self)
+
+        def calc(self, a: NDArray, b: NDArray, start: NDArray | None) -> NDArray:
+            given = None if start is None else start.copy()
+            out = self.dis.calc(a, b, None if self.cold else start)
+            self.calls.append((given, out.copy()))
+            return out
+
+    vertices = backproject(uv0, neutral_depth(uv0), K)
+    params = DenseParams(refine_head_pose=False, register_scan=False, temporal_sigma_frames=0.0)
+    pose = np.tile(np.eye(4), (T, 1, 1))
+    runs = {}
+    for cold in (False, True):
+        monkeypatch.setattr(dense_module, "_flow_engine", lambda p, c=cold: Recorded(engine(p), c))
+        runs[cold] = dense_track(color, depth, K, pose, vertices, faces, params)
+    forward, backward = engines[:2]  # the warm run's engines
+    for calls in (forward.calls, backward.calls):
+        assert len(calls) == T and calls[0][0] is None
+        for (_, before), (start, _) in zip(calls, calls[1:], strict=False):
+            np.testing.assert_array_equal(start, before)
+    apart = [
+        np.linalg.norm(_pixels(vertices + runs[False].displacement[t])
+                       - _pixels(vertices + runs[True].displacement[t]), axis=1)
+        for t in range(T)
+    ]  # fmt: skip
+    assert np.median(apart) < 0.05
+
+
+def _pixels(points: NDArray) -> NDArray:
+    """Pixels (P, 2) of camera-frame points (P, 3) m."""
+    proj = points @ K.T
+    return proj[:, :2] / proj[:, 2:]
+
+
 def test_smooth_depth_ignores_invalid_pixels():
     depth = np.full((20, 20), 0.5, np.float32)
     depth[5:8, 5:8] = np.nan
