@@ -13,12 +13,11 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    and the measured surface cancels from the motion.
 2. **Flow.** OpenCV's DIS optical flow from the neutral colour frame to frame t, and back, in
    the window the face reaches under the tracker's head poses (:func:`flow_window`), each
-   started from the same direction's flow of frame t - 1 (a large motion, such as a jaw drop
-   on lips without painted dots, is then reached in steps; from rest, DIS lost it: the
-   held-out vowels rendered without markers read 0.222 at the jaw drop, 0.199 so started,
-   0.151 with markers); the
-   vertex's pixel at t is its neutral pixel plus the forward flow, averaged with the backward
-   flow's estimate (``flow_two_way``). Where the backward flow does not
+   started from the same direction's flow of frame t - 1, so a large motion (a jaw drop on
+   lips without painted dots) is reached in steps: the held-out vowels rendered without
+   markers read 0.222 at the jaw drop with every flow started from rest, 0.199 so started
+   (0.151 with markers). The vertex's pixel at t is its neutral pixel plus the forward flow,
+   averaged with the backward flow's estimate (``flow_two_way``). Where the backward flow does not
    return it within ``max_flow_error_px`` (occlusion, the inside of the open mouth, flow
    failure) the vertex is not observed at t.
 3. **Lift.** The depth at that pixel (Gaussian-smoothed with invalid pixels left out) gives
