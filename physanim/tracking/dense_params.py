@@ -109,5 +109,6 @@ class DenseParams(BaseModel):
     workers: int = Field(
         0, ge=0, le=64,
         description="threads computing flow: 1 computes each frame's two directions in turn, "
-        "2 or more both at once (0: one per core); count",
+        "2 or more both at once (0: one per core; no more than 2 are used, as each frame's "
+        "flow starts from the frame before's); count",
     )  # fmt: skip
