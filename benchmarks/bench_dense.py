@@ -17,10 +17,12 @@ With ``--markerless`` every dataset is also measured rendered without painted ma
 (``<name>-markerless``, the demo's as ``data/library/demo-s0-markerless``) and tracked with
 ``track.backend=markerless``, side by side with the marker run; the timing table gives the
 fraction of frames in which the tracker found a face (issue #31: >= 99 %, figures within
-+0.03 of the markers').
++0.03 of the markers'). With ``--stereo`` every marker dataset is also measured from its stereo
+pair (``ingest.source=stereo``: depth by SGBM and the sub-pixel refinement; issue #31's
+target there: <= 0.15), labelled ``<dataset> (stereo)``.
 
 Run: .venv/bin/python benchmarks/bench_dense.py [--dataset demo] [--library] [--seed 0]
-    [--markerless]
+    [--markerless] [--stereo]
 The upstream outputs are the pipeline's own (default config), computed first when the store
 lacks them.
 """
@@ -54,10 +56,13 @@ from physanim.tracking.recording import track_recording
 from tasks.track import TrackStageParams
 
 
-def measure(dataset_arg: str, sets: list[str]) -> tuple[float, float, int, float, list[list]]:
+def measure(
+    dataset_arg: str, sets: list[str], label: str | None = None
+) -> tuple[float, float, int, float, list[list]]:
     """Seconds per frame of the landmark tracker and of dense capture, frames, the fraction
-    of frames with a face found, and the rows of the error table (``COLUMNS``) of one
-    dataset with the ``--set`` overrides ``sets``."""
+    of frames with a face found, and the rows of the error table (``COLUMNS``, named
+    ``label``, default the dataset) of one dataset with the ``--set`` overrides ``sets``."""
+    label = label or dataset_arg
     config, _ = load_config(
         FACE.config_model(), [FACE.default_config], dataset_overrides(dataset_arg) + sets
     )
@@ -88,7 +93,7 @@ def measure(dataset_arg: str, sets: list[str]) -> tuple[float, float, int, float
         params, kinematic - vertices[None],
     )  # fmt: skip
     dense_s = (time.perf_counter() - t0) / T
-    print(f"{dataset_arg}: landmark tracker {track_s:.3f} s/frame; dense {dense_s:.3f} s/frame")
+    print(f"{label}: landmark tracker {track_s:.3f} s/frame; dense {dense_s:.3f} s/frame")
 
     truth = load_truth(dataset / "ground_truth.zarr", T)
     true_u = follow_truth(vertices, truth.vertices, truth.faces).displacement
@@ -103,13 +108,15 @@ def measure(dataset_arg: str, sets: list[str]) -> tuple[float, float, int, float
             rms = float(np.sqrt(((u[f] - true_u[f])[moving] ** 2).sum(axis=1).mean()) * 1e3)
             regions = [None if np.isnan(x) else float(x) for x in fid.regions[0]]
             visible = None if np.isnan(seen) else float(seen)
-            rows.append([dataset_arg, peak, f, name, float(fid.overall[0]), visible, *regions, rms])
+            rows.append([label, peak, f, name, float(fid.overall[0]), visible, *regions, rms])
     return track_s, dense_s, T, face_found, rows
 
 
 COLUMNS = ["dataset", "peak", "frame", "captured", "overall", "visible", *REGIONS, "rms_mm"]
 #: the tracker of a dataset rendered without markers
 MARKERLESS = ["track.backend=markerless"]
+#: depth from the stereo pair
+STEREO = ["ingest.source=stereo"]
 
 
 def main() -> None:
@@ -120,20 +127,25 @@ def main() -> None:
     ap.add_argument(
         "--markerless", action="store_true", help="also without markers, tracked markerless"
     )
+    ap.add_argument(
+        "--stereo", action="store_true", help="also from the stereo pair of each marker dataset"
+    )
     args = ap.parse_args()
     names = [n for n in PERFORMANCE_NAMES if n != DEMO] if args.library else []
-    datasets = [(args.dataset, [])]
-    datasets += [(f"data/library/{dataset_name(n, args.seed)}", []) for n in names]
+    marked = [args.dataset] + [f"data/library/{dataset_name(n, args.seed)}" for n in names]
+    datasets = [(d, [], d) for d in marked]
     if args.markerless:
         bare = [DEMO] + names if args.dataset == DEMO else names
         datasets += [
-            (f"data/library/{dataset_name(n, args.seed, markers=False)}", MARKERLESS)
+            (f"data/library/{dataset_name(n, args.seed, markers=False)}", MARKERLESS, None)
             for n in bare
         ]  # fmt: skip
+    if args.stereo:
+        datasets += [(d, STEREO, f"{d} (stereo)") for d in marked]
     timing, rows = [], []
-    for d, sets in datasets:
-        track_s, dense_s, T, face_found, table = measure(d, sets)
-        timing.append([d, T, face_found, track_s, dense_s])
+    for d, sets, label in datasets:
+        track_s, dense_s, T, face_found, table = measure(d, sets, label)
+        timing.append([label or d, T, face_found, track_s, dense_s])
         rows += table
     print(f"{'dataset':28s} {'peak':12s} {'captured':15s} {'overall':>8s} {'visible':>8s} "
           + " ".join(f"{r:>9s}" for r in REGIONS))  # fmt: skip
@@ -141,7 +153,8 @@ def main() -> None:
         cells = " ".join("      n/a" if x is None else f"{x:9.3f}" for x in r[6:-1])
         vis = "     n/a" if r[5] is None else f"{r[5]:8.3f}"
         print(f"{r[0]:28s} {r[1]:12s} {r[3]:15s} {r[4]:8.3f} {vis} {cells}  rms {r[-1]:.2f} mm")
-    dense_rows = [r for r in rows if r[3] == "dense capture"]
+    dense_rows = [r for r in rows if r[3] == "dense capture" and not r[0].endswith("(stereo)")]
+    stereo_rows = [r for r in rows if r[3] == "dense capture" and r[0].endswith("(stereo)")]
     record(
         "bench_dense",
         [
@@ -161,7 +174,7 @@ def main() -> None:
                 COLUMNS,
                 rows,
                 notes="visible: the skin the camera sees in the neutral frame; target <= 0.10 "
-                "and <= 0.5 mm RMS at every peak (issue #31)",
+                "(<= 0.15 from a stereo pair) and <= 0.5 mm RMS at every peak (issue #31)",
             ),
         ],
         **describe(__doc__, "bench_dense"),
@@ -170,6 +183,7 @@ def main() -> None:
             "track_s_per_frame": max(t[3] for t in timing),
             "face_found_min": min(t[2] for t in timing),
             "dense_worst_peak": max(r[4] for r in dense_rows),
+            **({"stereo_worst_peak": max(r[4] for r in stereo_rows)} if stereo_rows else {}),
         },
     )
 

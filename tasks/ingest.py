@@ -90,7 +90,7 @@ def compute(params: IngestParams, ctx: StageContext[IngestParams]) -> IngestOutp
 SPEC = StageSpec.typed(
     "ingest",
     compute,
-    version="2",
+    version="3",
     doc="RealSense bag / Open3D RGBD folder / stereo pair -> colour, metric depth, intrinsics",
     fingerprint=fingerprint,
 )

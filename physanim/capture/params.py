@@ -107,6 +107,16 @@ class IngestParams(BaseModel):
         le=100.0,
         description="Stereo: invalid where the block's grey-level std is lower; 8-bit levels",
     )
+    subpixel_sigma_px: float = Field(
+        2.5,
+        ge=0.0,
+        le=20.0,
+        description="Stereo: Gaussian window of the sub-pixel (Lucas-Kanade) refinement of "
+        "SGBM's disparity, which removes its pull towards whole pixels (0 = off); px",
+    )
+    subpixel_iterations: int = Field(
+        2, ge=0, le=20, description="Stereo: steps of the sub-pixel refinement; count"
+    )
     wls: bool = Field(False, description="Stereo: WLS-filter the disparity (ximgproc); bool")
     wls_lambda: float = Field(8000.0, gt=0, description="Stereo: WLS smoothness lambda; 1")
     wls_sigma: float = Field(1.2, gt=0, description="Stereo: WLS colour sigma; 8-bit levels")

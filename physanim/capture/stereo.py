@@ -1,4 +1,5 @@
-"""Depth from a calibrated stereo pair: rectification, SGBM, left-right check, optional WLS.
+"""Depth from a calibrated stereo pair: rectification, SGBM, left-right check, optional WLS,
+sub-pixel refinement (:mod:`physanim.capture.subpixel`).
 
 Depth (m) along the rectified left camera's axis: ``z = f_x * B / (d + doffs)`` with ``B`` the
 baseline (m), ``d`` the subpixel disparity (px; SGBM returns 1/16 px steps) and ``doffs`` the
@@ -24,6 +25,7 @@ import yaml
 from physanim.capture.frames import CaptureError
 from physanim.capture.intrinsics import frame_rate, is_camera_matrix, pixel_count
 from physanim.capture.params import IngestParams
+from physanim.capture.subpixel import refine_disparity
 
 CALIBRATION_KEYS = ("K1", "D1", "K2", "D2", "R", "T", "image_width", "image_height")
 CALIBRATION_HELP = (
@@ -300,7 +302,9 @@ class StereoDepth(StereoRig):
         invalid. Left-right check: a pixel is dropped where the right image's disparity at its
         match is valid and disagrees by more than ``lr_max_diff``; where the right matcher
         found nothing (its uniqueness and speckle filters) the left value is kept. Blocks
-        with less grey-level texture than ``min_texture`` are dropped.
+        with less grey-level texture than ``min_texture`` are dropped. The valid
+        disparities are then refined to sub-pixel accuracy (``subpixel_sigma_px``,
+        ``subpixel_iterations``; :func:`physanim.capture.subpixel.refine_disparity`).
         """
         p = self.params
         pad = max(self.disparities.stop, 0)
@@ -327,7 +331,7 @@ class StereoDepth(StereoRig):
         consistent = ~right_valid | (np.abs(disp + back_raw / np.float32(16.0)) <= p.lr_max_diff)
         valid &= inside & consistent & (disp + self.doffs > 0)
         disp[~valid] = np.nan
-        return disp
+        return refine_disparity(left, right, disp, p.subpixel_sigma_px, p.subpixel_iterations)
 
     def orientation(self, left: np.ndarray, right: np.ndarray) -> tuple[int, float, float]:
         """(number of sparse matches, fraction whose disparity is in the searched range, the

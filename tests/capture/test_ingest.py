@@ -55,7 +55,7 @@ def test_depth_matches_ground_truth(captures: dict[str, Capture], ground_truth: 
     err = np.median(np.abs(stereo[ok] - truth[ok]))
     valid = ok.sum() / face.sum()
     print(f"stereo depth: median |error| {err * 1e3:.2f} mm over {valid:.1%} of face pixels")
-    assert err < 3e-3 and valid > 0.8
+    assert err < 0.6e-3 and valid > 0.8  # 0.42 mm; SGBM without sub-pixel refinement 0.84 mm
     # Background (no texture) stays invalid instead of producing spurious depth.
     assert np.isfinite(stereo[~face]).mean() < 0.02
 
