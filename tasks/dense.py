@@ -107,6 +107,6 @@ def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[s
 SPEC = StageSpec.typed(
     "dense",
     compute,
-    version="6",
+    version="7",
     doc="captured motion of every scan vertex: dense capture (flow + depth) or the kinematic scan",
 )

@@ -106,6 +106,12 @@ class DenseParams(BaseModel):
         description="re-estimate the head pose from the dense points that ride rigidly "
         "with the head (the landmark tracker's pose is the start); bool",
     )
+    pose_depth_weight: float = Field(
+        0.1, gt=0.0, le=1.0,
+        description="weight of a point's depth (camera axis) against its image-plane "
+        "coordinates in that re-estimated pose: depth is the noisier and, where the skin "
+        "bulges towards the camera, the more biased coordinate (1: isotropic); 1",
+    )  # fmt: skip
     workers: int = Field(
         0, ge=0, le=64,
         description="threads computing flow: 1 computes each frame's two directions in turn, "

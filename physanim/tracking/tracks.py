@@ -10,6 +10,7 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from physanim.tracking.params import TrackParams
 from physanim.tracking.smooth import kalman_rts, one_euro
@@ -103,3 +104,63 @@ def head_poses(
         return first
     rho = rigidity_weights(points[seen], first[seen])
     return _frame_poses(points, confidence * rho[None], template_actor, iterations)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) cross-product matrices of vectors (n, 3)."""
+    z = np.zeros(len(v))
+    return np.stack(
+        [
+            np.stack([z, -v[:, 2], v[:, 1]], axis=1),
+            np.stack([v[:, 2], z, -v[:, 0]], axis=1),
+            np.stack([-v[:, 1], v[:, 0], z], axis=1),
+        ],
+        axis=1,
+    )
+
+
+def refine_poses_anisotropic(
+    points: np.ndarray,
+    confidence: np.ndarray,
+    template_actor: np.ndarray,
+    poses: np.ndarray,
+    axis_weights: tuple[float, float, float],
+    iterations: int = 6,
+) -> np.ndarray:
+    """The poses (T, 4, 4) camera <- actor refined so that each frame's residuals are
+    measured with ``axis_weights`` on the camera frame's x, y, z (a lifted point's depth is
+    noisier than its image position: a weight below 1 on z trusts the image more).
+
+    Starting from ``poses`` (e.g. :func:`head_poses`), per frame ``iterations`` Gauss-Newton
+    steps of min sum_i w_i sum_a c_a e_ia^2, e_i = R X_i + t - P_i, on the rotation (as a
+    rotation vector) and translation, with w_i the point's ``confidence`` (T, K) times its
+    rigidity under the starting poses (:func:`rigidity_weights`) times Cauchy weights on the
+    weighted residual (scale its median). ``points`` (T, K, 3) m camera frame (NaN not
+    observed), ``template_actor`` (K, 3) m. Frames whose pose is NaN stay NaN."""
+    weights_axis = np.asarray(axis_weights, dtype=np.float64)
+    out = poses.copy()
+    seen = np.isfinite(poses[:, 0, 0])
+    if seen.sum() < 2:
+        return out
+    rho = rigidity_weights(points[seen], poses[seen])
+    eye = np.broadcast_to(np.eye(3), (len(template_actor), 3, 3))
+    for t in np.flatnonzero(seen):
+        observed = np.isfinite(points[t]).all(axis=1)
+        base = np.where(observed, confidence[t], 0.0) * rho
+        if np.count_nonzero(base) < 3:
+            continue
+        target = np.nan_to_num(points[t])
+        R, tr = poses[t, :3, :3].copy(), poses[t, :3, 3].copy()
+        for _ in range(iterations):
+            rx = template_actor @ R.T
+            e = rx + tr - target
+            res = np.sqrt((e**2 * weights_axis).sum(axis=1))
+            w = base / (1.0 + (res / (np.median(res[base > 0]) + 1e-9)) ** 2)
+            J = np.concatenate([-_skew(rx), eye], axis=2)  # (K, 3, 6): d e / d (omega, t)
+            JW = J * (weights_axis[None, :, None] * w[:, None, None])
+            H = np.einsum("kai,kaj->ij", JW, J)
+            step = -np.linalg.solve(H + 1e-12 * np.eye(6), np.einsum("kai,ka->i", JW, e))
+            R = Rotation.from_rotvec(step[:3]).as_matrix() @ R
+            tr = tr + step[3:]
+        out[t, :3, :3], out[t, :3, 3] = R, tr
+    return out
