@@ -57,3 +57,18 @@ def fit_transform(
     rot = (u * s) @ vt
     scale = float(np.sum(sig * s) / np.sum(w * np.sum(xs**2, axis=1))) if with_scale else 1.0
     return Transform(scale=scale, rotation=rot, translation=mu_t - scale * rot @ mu_s)
+
+
+def cross_matrices(v: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) matrices [v]x with [v]x u = v x u, of vectors ``v`` (n, 3). A small rotation
+    omega moves a point p by omega x p = -[p]x omega: -[p]x is the rotation's Jacobian."""
+    v = np.asarray(v)
+    z = np.zeros(len(v), dtype=v.dtype)
+    return np.stack(
+        [
+            np.stack([z, -v[:, 2], v[:, 1]], axis=1),
+            np.stack([v[:, 2], z, -v[:, 0]], axis=1),
+            np.stack([-v[:, 1], v[:, 0], z], axis=1),
+        ],
+        axis=1,
+    )

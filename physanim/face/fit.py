@@ -24,7 +24,7 @@ from physanim.face.landmarks import FEATURE_POINTS
 from physanim.face.model import FaceModel, pose_matrix
 from physanim.face.params import FitParams
 from physanim.mesh.binding import bind_points
-from physanim.transforms import fit_transform
+from physanim.transforms import cross_matrices, fit_transform
 
 
 @dataclass(frozen=True)
@@ -128,9 +128,7 @@ def _solve(
         centre = w @ q / w.sum()
         qc = q - centre
         jac = np.zeros((len(q), 3, 6 + n))
-        jac[:, 0, 1], jac[:, 0, 2] = qc[:, 2], -qc[:, 1]  # d(omega x qc)/d omega = -[qc]x
-        jac[:, 1, 0], jac[:, 1, 2] = -qc[:, 2], qc[:, 0]
-        jac[:, 2, 0], jac[:, 2, 1] = qc[:, 1], -qc[:, 0]
+        jac[:, :, :3] = -cross_matrices(qc)  # d(omega x qc)/d omega
         jac[:, :, 3:6] = np.eye(3)
         jac[:, :, 6:] = np.einsum("ij,nkj->kin", rot, basis)
         rhs = target - base @ rot.T - t

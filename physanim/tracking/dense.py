@@ -372,11 +372,11 @@ def observe(
         # a rigid pose needs a few thousand well-spread points, not every vertex (20k on the
         # demo: 3.4 s of the stage's 14 s went to the pose)
         every = slice(None, None, max(1, len(view.points) // POSE_POINTS))
-        observed = np.isfinite(cam[:, every]).all(axis=2)
-        poses = head_poses(cam[:, every], observed.astype(np.float64), view.points[every])
+        observed = np.isfinite(cam[:, every]).all(axis=2).astype(np.float64)
+        poses = head_poses(cam[:, every], observed, view.points[every])
         if params.pose_depth_weight < 1.0:
             poses = refine_poses_anisotropic(
-                cam[:, every], observed.astype(np.float64), view.points[every], poses,
+                cam[:, every], observed, view.points[every], poses,
                 (1.0, 1.0, params.pose_depth_weight),
             )  # fmt: skip
         lost = ~np.isfinite(poses[:, 0, 0])

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from physanim.tracking.params import TrackParams
 from physanim.tracking.smooth import kalman_rts, one_euro
-from physanim.transforms import fit_transform
+from physanim.transforms import cross_matrices, fit_transform
 
 
 class TrackingError(ValueError):
@@ -106,19 +106,6 @@ def head_poses(
     return _frame_poses(points, confidence * rho[None], template_actor, iterations)
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) cross-product matrices of vectors (n, 3)."""
-    z = np.zeros(len(v))
-    return np.stack(
-        [
-            np.stack([z, -v[:, 2], v[:, 1]], axis=1),
-            np.stack([v[:, 2], z, -v[:, 0]], axis=1),
-            np.stack([-v[:, 1], v[:, 0], z], axis=1),
-        ],
-        axis=1,
-    )
-
-
 def refine_poses_anisotropic(
     points: np.ndarray,
     confidence: np.ndarray,
@@ -156,7 +143,7 @@ def refine_poses_anisotropic(
             e = rx + tr - target
             res = np.sqrt((e**2 * weights_axis).sum(axis=1))
             w = base / (1.0 + (res / (np.median(res[base > 0]) + 1e-9)) ** 2)
-            J = np.concatenate([-_skew(rx), eye], axis=2)  # (K, 3, 6): d e / d (omega, t)
+            J = np.concatenate([-cross_matrices(rx), eye], axis=2)  # (K, 3, 6): d e / d (omega, t)
             JW = J * (weights_axis[None, :, None] * w[:, None, None])
             H = np.einsum("kai,kaj->ij", JW, J)
             step = -np.linalg.solve(H + 1e-12 * np.eye(6), np.einsum("kai,ka->i", JW, e))
