@@ -136,16 +136,14 @@ def main() -> None:
     datasets = [(d, [], d) for d in marked]
     if args.markerless:
         bare = [DEMO] + names if args.dataset == DEMO else names
-        datasets += [
-            (f"data/library/{dataset_name(n, args.seed, markers=False)}", MARKERLESS, None)
-            for n in bare
-        ]  # fmt: skip
+        bare_paths = [f"data/library/{dataset_name(n, args.seed, markers=False)}" for n in bare]
+        datasets += [(d, MARKERLESS, d) for d in bare_paths]
     if args.stereo:
         datasets += [(d, STEREO, f"{d} (stereo)") for d in marked]
     timing, rows = [], []
     for d, sets, label in datasets:
         track_s, dense_s, T, face_found, table = measure(d, sets, label)
-        timing.append([label or d, T, face_found, track_s, dense_s])
+        timing.append([label, T, face_found, track_s, dense_s])
         rows += table
     print(f"{'dataset':28s} {'peak':12s} {'captured':15s} {'overall':>8s} {'visible':>8s} "
           + " ".join(f"{r:>9s}" for r in REGIONS))  # fmt: skip
