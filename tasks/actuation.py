@@ -269,9 +269,15 @@ def inverse_step(
     )
     model = build_model(tetra.nodes, tetra.tets, materials, params)
     lift = seam_lift(tetra.tets, tetra.side, lip_lift(params))
-    basis = StressBasis.covering(tetra.nodes, tetra.tets, fit_params.patch_spacing_m, lift)
+    skin = cKDTree(tetra.nodes[tetra.skin])
+    # patch centres where the facial muscles lie, unless the deep tissue may hold them too
+    centroids = tetra.nodes[tetra.tets].mean(axis=1)
+    muscle = (
+        None if fit_params.deep_centres else skin.query(centroids)[0] <= fit_params.deep_below_m
+    )
+    basis = StressBasis.covering(tetra.nodes, tetra.tets, fit_params.patch_spacing_m, lift, muscle)
     patch_region = face_regions(basis.centres, landmarks)
-    depth = cKDTree(tetra.nodes[tetra.skin]).query(basis.centres)[0]
+    depth = skin.query(basis.centres)[0]
     cost = fit_params.patch_cost(region_names(patch_region), depth)
     t_model = time.perf_counter() - t0
     fit = fit_actuation(

@@ -56,6 +56,9 @@ DEVIATORIC = np.array(
 )
 #: a patch reaches this many times the centres' spacing (every tet lies in several patches)
 RADIUS_PER_SPACING = 2.0
+#: a tet that may hold no centre lies within this many spacings of one: well inside a
+#: patch's reach, where its weight is over a fifth of the centre's
+DEEP_REACH_PER_SPACING = 1.5
 
 
 def stress_force_operator(
@@ -84,16 +87,28 @@ def model_force_operator(model: FemModel) -> sp.csr_matrix:
 SEAM_LIFT_PER_SPACING = RADIUS_PER_SPACING
 
 
-def covering_centres(points: NDArray, spacing: float) -> NDArray:
+def covering_centres(
+    points: NDArray, spacing: float, eligible: NDArray | None = None, reach: float | None = None
+) -> NDArray:
     """Indices (P,) of patch centres among ``points`` (M, D) m by farthest-point sampling,
-    from the point nearest their mean, until every point lies within ``spacing`` m of one."""
+    from the point nearest their mean, until every point lies within ``spacing`` m of one.
+
+    ``eligible`` (M,) bool: centres only among these points, until each of them lies within
+    ``spacing`` m of one; the others then take further centres only where they lie farther
+    than ``reach`` m (default ``spacing``) from every centre."""
     p = np.asarray(points, dtype=np.float64)
-    first = int(np.argmin(np.linalg.norm(p - p.mean(axis=0), axis=1)))
-    chosen, dist = [first], np.linalg.norm(p - p[first], axis=1)
-    while dist.max() > spacing:
-        nxt = int(dist.argmax())
-        chosen.append(nxt)
-        dist = np.minimum(dist, np.linalg.norm(p - p[nxt], axis=1))
+    pool = np.arange(len(p)) if eligible is None else np.flatnonzero(eligible)
+    if not len(pool):
+        pool, eligible = np.arange(len(p)), None
+    first = pool[int(np.argmin(np.linalg.norm(p[pool] - p[pool].mean(axis=0), axis=1)))]
+    chosen, dist = [int(first)], np.linalg.norm(p - p[first], axis=1)
+    for among, limit in ((pool, spacing), (np.arange(len(p)), reach or spacing)):
+        while dist[among].max() > limit:
+            nxt = int(among[dist[among].argmax()])
+            chosen.append(nxt)
+            dist = np.minimum(dist, np.linalg.norm(p - p[nxt], axis=1))
+        if eligible is None:
+            break
     return np.asarray(chosen, dtype=np.int64)
 
 
@@ -160,14 +175,20 @@ class StressBasis:
 
     @classmethod
     def covering(
-        cls, nodes: NDArray, tets: NDArray, spacing: float, tet_lift: NDArray | None = None
+        cls,
+        nodes: NDArray,
+        tets: NDArray,
+        spacing: float,
+        tet_lift: NDArray | None = None,
+        eligible: NDArray | None = None,
     ) -> StressBasis:
         """Patches centred on tet centroids at most ``spacing`` m from every centroid
         (:func:`covering_centres`, in the four coordinates with ``tet_lift`` (M,) m), each
-        reaching ``RADIUS_PER_SPACING`` times that."""
+        reaching ``RADIUS_PER_SPACING`` times that. ``eligible`` (M,) bool: centres only on
+        these tets (the others each lie within ``DEEP_REACH_PER_SPACING`` spacings of one)."""
         centroids = np.asarray(nodes, dtype=np.float64)[np.asarray(tets)].mean(axis=1)
         points = _lifted(centroids, tet_lift)
-        at = covering_centres(points, spacing)
+        at = covering_centres(points, spacing, eligible, DEEP_REACH_PER_SPACING * spacing)
         return cls.patches(
             nodes, tets, centroids[at], RADIUS_PER_SPACING * spacing, tet_lift, points[at, 3]
         )

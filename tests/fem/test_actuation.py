@@ -5,6 +5,7 @@ import pytest
 from fem_meshes import box_mesh
 
 from physanim.fem.actuation import (
+    DEEP_REACH_PER_SPACING,
     DEVIATORIC,
     SEAM_LIFT_PER_SPACING,
     Actuation,
@@ -132,6 +133,30 @@ def test_stress_basis_is_a_smooth_partition_of_unity_covering_the_mesh():
     np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12 * np.abs(f).max())
     np.testing.assert_allclose(np.cross(nodes, f).sum(axis=0), 0.0, atol=1e-13 * np.abs(f).max())
     assert len(covering_centres(centroids, 1.0)) == 1
+
+
+def test_centres_restricted_to_a_layer_still_cover_the_mesh():
+    """Centres only on the eligible tets (a 'muscle layer' over the top 10 mm of a 30 mm
+    block): each eligible tet within the spacing of a centre, every other within
+    DEEP_REACH_PER_SPACING spacings of one, fewer patches than the unrestricted covering,
+    and the weights still a partition of unity."""
+    nodes, tets = box_mesh((6, 4, 6), (0.06, 0.04, 0.03))
+    spacing = 0.008
+    centroids = nodes[tets].mean(axis=1)
+    layer = centroids[:, 2] > 0.02
+    basis = StressBasis.covering(nodes, tets, spacing, eligible=layer)
+    full = StressBasis.covering(nodes, tets, spacing)
+    dist = np.linalg.norm(centroids[:, None] - basis.centres[None], axis=2).min(axis=1)
+    assert dist[layer].max() <= spacing
+    assert dist[~layer].max() <= DEEP_REACH_PER_SPACING * spacing
+    assert dist[~layer].max() > spacing  # the deep tissue is not covered as finely
+    on_layer = np.isin(basis.centres, centroids[layer]).all(axis=1)
+    assert on_layer.sum() >= 0.8 * basis.n_patches
+    assert basis.n_patches < 0.8 * full.n_patches
+    np.testing.assert_allclose(np.asarray(basis.weights.sum(axis=1)).ravel(), 1.0, rtol=1e-12)
+    # no eligible tet at all: the plain covering
+    none = StressBasis.covering(nodes, tets, spacing, eligible=np.zeros(len(tets), bool))
+    np.testing.assert_array_equal(none.centres, full.centres)
 
 
 def test_lip_patches_never_span_the_seam_and_still_cover_the_mesh():

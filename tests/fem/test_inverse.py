@@ -95,9 +95,10 @@ def test_the_regularisation_leaves_no_actuation_far_from_any_motion():
 @pytest.mark.parametrize("factors", [False, True])
 def test_the_least_squares_over_frames_solve_the_normal_equations(vary, anchored, factors):
     """Against the stacked normal equations solved directly: frame-mean weights make the
-    preconditioner exact (no iteration; also with stress cost factors that vary over the
-    coefficients), weights that vary over frames take a few; with ``anchored`` the frames
-    follow one held at zero (its step to the first one counts)."""
+    preconditioner exact to single precision (its start within 1e-5 of the answer, one or two
+    iterations to 1e-12; also with stress cost factors that vary over the coefficients),
+    weights that vary over frames take more; with ``anchored`` the frames follow one held at
+    zero (its step to the first one counts)."""
     rng = np.random.default_rng(3)
     n_obs, n, n_frames = 12, 7, 6
     R = rng.normal(size=(3 * n_obs, n)) * 1e-6
@@ -109,7 +110,8 @@ def test_the_least_squares_over_frames_solve_the_normal_equations(vary, anchored
     f = rng.uniform(1.0, 25.0, n) if factors else np.ones(n)
     ls = LeastSquares(R, v, 3e-5, 1e-4, w.mean(axis=0), n_frames, anchored, f)
     a, iterations = ls.solve(y, w, rtol=1e-12)
-    assert (iterations > 0) == vary
+    start, _ = ls.solve(y, w, max_iter=0)
+    assert 0 < iterations <= 2 if not vary else iterations > 2
     A = np.zeros((n_frames * n, n_frames * n))
     b = np.zeros(n_frames * n)
     diff = np.diff(np.eye(n_frames + anchored), axis=0)[:, int(anchored) :]
@@ -124,6 +126,8 @@ def test_the_least_squares_over_frames_solve_the_normal_equations(vary, anchored
             A[block, s * n : (s + 1) * n] += mu * lap[t, s] * np.diag(v)
     direct = np.linalg.solve(A, b).reshape(n_frames, n)
     np.testing.assert_allclose(a, direct, rtol=1e-7, atol=1e-9 * np.abs(direct).max())
+    if not vary:
+        assert np.linalg.norm(start - direct) < 1e-5 * np.linalg.norm(direct)
 
 
 def test_the_robust_fit_does_not_chase_a_node_the_conditions_contradict():
