@@ -350,10 +350,16 @@ def dag(
 def show(
     stage: Annotated[str, typer.Argument(help="stage name")],
     target: Target,
-    key: Annotated[str | None, typer.Option(help="output key (default: latest)")] = None,
+    key: Annotated[
+        str | None,
+        typer.Option(
+            help="output key prefix (default: the -c / --set configuration's, else latest)"
+        ),
+    ] = None,
 ) -> None:
-    """Provenance of a stage's latest (or given) output, the arrays it holds and where its
-    plain files are (``files.folder``: videos, figures, exported meshes)."""
+    """Provenance of a stage's output, the arrays it holds and where its plain files are
+    (``files.folder``: videos, figures, exported meshes): the output of the configuration that
+    ``-c`` / ``--set`` give, else of the latest run, or the one ``--key`` names."""
     _stage(target.pipeline, stage)
     store = target.store(create=False)
     if key is not None:
@@ -361,6 +367,15 @@ def show(
         if len(matches) != 1:
             raise fail(f"key prefix {key!r} matches {len(matches)} outputs of {stage}")
         key = matches[0]
+    elif target.chosen:
+        _, entries = _plan(target, create=False)
+        key = next(e.key for e in entries if e.stage == stage)
+        if key not in store.all_keys(stage):
+            raise fail(
+                f"{stage} has no output for this configuration yet (key {key[:12]}): run "
+                "`physanim run` with the same -c / --set first, or drop them to see the latest",
+                1,
+            )
     try:
         group = store.open(stage, key)
     except StageOutputMissing as exc:

@@ -76,12 +76,15 @@ def load(
 @dataclass(frozen=True)
 class Target:
     """What a command works on: a pipeline, its validated config, the ``-c`` files and the
-    overrides (dataset, then ``--set``) it was loaded from."""
+    overrides (dataset, then ``--set``) it was loaded from; ``chosen``: whether ``-c`` or
+    ``--set`` chose a configuration (a command that reads the latest output by default then
+    reads that configuration's)."""
 
     pipeline: Pipeline
     config: PipelineConfig
     configs: list[Path]
     overrides: list[str]
+    chosen: bool = False
 
     def store(self, *, create: bool = True) -> StageStore:
         """The config's stage store; ``create=False`` for commands that only read (nothing
@@ -119,7 +122,9 @@ def with_target(command: Callable[..., Any]) -> Callable[..., Any]:
     ) -> Any:
         dag = get_pipeline(pipeline)
         loaded = load(dag, config, set_, dataset)
-        target = Target(dag, loaded, list(config or []), overrides(dataset, set_))
+        target = Target(
+            dag, loaded, list(config or []), overrides(dataset, set_), bool(config or set_)
+        )
         return command(target=target, **kwargs)
 
     wrapper.__dict__["__signature__"] = signature.replace(parameters=[*shared, *own])

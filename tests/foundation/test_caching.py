@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ from pydantic import BaseModel, ConfigDict
 from physanim.config import load_config
 from physanim.pipeline import Pipeline, StageContext, StageSpec, execute_plan_locally, make_plan
 from physanim.store import StageStore
+from tests.commands import TOY, invoke
 from tests.foundation.toy_stages import executions as ran
 from tests.foundation.toy_stages import toy_pipeline
 
@@ -64,6 +66,26 @@ def test_variants_coexist_and_both_read(toy_config: Path) -> None:
     # going back to the first variant is a pure cache hit that moves the latest pointer
     assert run(pipe, toy_config, "scale.factor=2") == ([], [])
     assert float(store.open("total")["total"][0]) == pytest.approx(2 * base)
+
+
+def test_show_reads_the_output_of_the_configuration_it_is_given(toy_config: Path) -> None:
+    """``physanim show`` with ``-c`` / ``--set`` shows that configuration's output, not the
+    latest run's (a model-2 run after the default one must not answer for the default); with
+    neither, the latest; a configuration not run yet is an error that says so."""
+    args = ["-p", TOY, "-c", str(toy_config)]
+    for factor in ("2.0", "3.0"):
+        assert invoke("run", *args, "--local", "--set", f"scale.factor={factor}").returncode == 0
+
+    def shown(*options: str) -> float:
+        out = invoke("show", "scale", "-p", TOY, *options)
+        assert out.returncode == 0, out.stderr
+        return json.loads(out.stdout)["params"]["factor"]
+
+    assert shown("-c", str(toy_config)) == 2.0  # the file's own factor, run first
+    assert shown("-c", str(toy_config), "--set", "scale.factor=3.0") == 3.0
+    assert shown("--dataset", str(toy_config.parent / "data")) == 3.0  # the latest
+    missing = invoke("show", "scale", *args, "--set", "scale.factor=5.0")
+    assert missing.returncode == 1 and "no output for this configuration yet" in missing.stderr
 
 
 def test_status_matches_run_for_selections(toy_config: Path) -> None:
