@@ -223,9 +223,9 @@ def _frame_points(
 
 
 def _smoother(laplacian: sp.csr_array, seen: NDArray, lam: float) -> Callable[[NDArray], NDArray]:
-    """``solve(b)`` for (S_seen + lam L) u = b on the scan graph, factorised once (CHOLMOD
-    when installed, its block solve over the frames' columns; else SuperLU); S_seen the 0/1
-    diagonal of the seen vertices, L the graph ``laplacian`` (N, N). b (N, k)."""
+    """``solve(b)`` for (S_seen + lam L) u = b on the scan graph, factorised once (PARDISO
+    where MKL loads, else CHOLMOD, else SuperLU; a block solve over the frames' columns);
+    S_seen the 0/1 diagonal of the seen vertices, L the graph ``laplacian`` (N, N). b (N, k)."""
     from physanim.fem.linsolve import factorize_many as factorize
 
     n = len(seen)
