@@ -34,8 +34,8 @@ class ModelParams(BaseModel):
         "auto",
         description="Sparse direct solver. Newmark matrix A_uu: 'auto' = PARDISO (MKL, the "
         "'anp' law's one-ring augmented matrix by LDL^T) when MKL loads, else CHOLMOD "
-        "(scikit-sparse) when installed, else SuperLU with MMD(A^T+A) ordering. Static K_uu "
-        "of the inverse step and previews: 'auto' = CHOLMOD, else SuperLU. "
+        "(scikit-sparse) when installed, else SuperLU with MMD(A^T+A) ordering; the inverse "
+        "step's static K_uu the same. Previews' static K_uu: 'auto' = CHOLMOD, else SuperLU. "
         "'superlu_colamd' = scipy's default splu (baseline)",
     )
 
