@@ -92,3 +92,17 @@ def test_warnings_open_the_report(tmp_path):
     box = text.index("<section class='card warnings'><h2>Warnings (2)</h2>")
     assert box < text.index("</header>") + 30 and "rms_mm is &lt;NaN&gt;" in text
     assert "Warnings" not in build_report(tmp_path / "b", title="t").read_text()
+
+
+def test_the_capture_table_shows_the_simulated_facts_against_their_targets():
+    """The report's physics rows read the simulate summary: the stress ratio, the tets turned
+    inside out and the drive's share of the skin, each beside its target."""
+    from physanim.render.run_report import capture_tables
+
+    simulated = {"peak_to_p99_von_mises": 3.26, "inverted_tets": 60,
+                 "spring_node_fraction_of_skin": 0.0}  # fmt: skip
+    evaluated = {"fidelity": {"fem": {"worst": 0.2}, "kinematic": {"worst": 0.1}}}
+    ((_, rows),) = capture_tables(evaluated, simulated).values()
+    by_name = {row[0]: (row[1], row[3]) for row in rows}
+    assert by_name["tets turned inside out (in any frame)"] == (60, "0")
+    assert by_name["peak / 99th-percentile von Mises stress (worst frame)"] == (3.26, "<= 5")
