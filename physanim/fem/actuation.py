@@ -97,18 +97,20 @@ def covering_centres(
     ``spacing`` m of one; the others then take further centres only where they lie farther
     than ``reach`` m (default ``spacing``) from every centre."""
     p = np.asarray(points, dtype=np.float64)
-    pool = np.arange(len(p)) if eligible is None else np.flatnonzero(eligible)
+    everything = np.arange(len(p))
+    pool = everything if eligible is None else np.flatnonzero(eligible)
     if not len(pool):
-        pool, eligible = np.arange(len(p)), None
+        pool = everything
+    rounds = [(pool, spacing)]
+    if len(pool) < len(p):
+        rounds.append((everything, reach or spacing))
     first = pool[int(np.argmin(np.linalg.norm(p[pool] - p[pool].mean(axis=0), axis=1)))]
     chosen, dist = [int(first)], np.linalg.norm(p - p[first], axis=1)
-    for among, limit in ((pool, spacing), (np.arange(len(p)), reach or spacing)):
+    for among, limit in rounds:
         while dist[among].max() > limit:
             nxt = int(among[dist[among].argmax()])
             chosen.append(nxt)
             dist = np.minimum(dist, np.linalg.norm(p - p[nxt], axis=1))
-        if eligible is None:
-            break
     return np.asarray(chosen, dtype=np.int64)
 
 
