@@ -9,6 +9,7 @@ line (or PHYSANIM_DEBUG=1) shows their tracebacks.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
@@ -574,7 +575,10 @@ def serve(
         console.print(f"{'started' if started else 'using'} Prefect server {url}")
         # The deployment is served by a child process: Prefect's runner stops cleanly on
         # SIGINT, so SIGINT/SIGTERM here are forwarded to it as SIGINT; then the server stops.
-        child = subprocess.Popen(args, env={**os.environ, "PREFECT_API_URL": url})
+        # Its own session holds it and the flow runs it starts, so none outlives the stop.
+        child = subprocess.Popen(
+            args, env={**os.environ, "PREFECT_API_URL": url}, start_new_session=True
+        )
         asked: list[float] = []  # when a stop was asked for
 
         def forward(_signum: int, _frame: object) -> None:
@@ -595,10 +599,13 @@ SERVE_STOP_GRACE_S = 20.0
 def _wait_or_kill(child: subprocess.Popen, asked: list[float]) -> int:
     """The child's exit status; killed when it is still running ``SERVE_STOP_GRACE_S`` after
     the first stop request in ``asked`` (Prefect's runner has hung in its shutdown when the
-    server's SQLite database stayed locked)."""
+    server's SQLite database stayed locked). Then whatever is left of the process group it
+    leads is killed too: a flow run the runner started and left behind waited for ever on
+    the stopped server, holding ``serve``'s output open."""
     while True:
         try:
-            return child.wait(timeout=1.0)
+            rc = child.wait(timeout=1.0)
+            break
         except subprocess.TimeoutExpired:
             if asked and time.monotonic() - asked[0] > SERVE_STOP_GRACE_S:
                 console.print(
@@ -606,7 +613,11 @@ def _wait_or_kill(child: subprocess.Popen, asked: list[float]) -> int:
                     "signal; killed it"
                 )
                 child.kill()
-                return child.wait()
+                rc = child.wait()
+                break
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(child.pid, signal.SIGKILL)  # no group of that id: nothing left
+    return rc
 
 
 def _is_io(exc: BaseException | None) -> bool:

@@ -45,7 +45,10 @@ def test_serve_processes_new_dataset_and_stops_on_signal(tmp_path: Path) -> None
             out, _ = proc.communicate(timeout=120)
         except subprocess.TimeoutExpired:
             proc.kill()
-            out, _ = proc.communicate()
+            try:  # a process serve left behind would hold its output open for ever
+                out, _ = proc.communicate(timeout=30)
+            except subprocess.TimeoutExpired:
+                out = "(its output still held open by a process it left behind)"
             raise AssertionError(f"serve did not stop on SIGTERM:\n{out[-3000:]}") from None
     assert proc.returncode == 0, out[-3000:]
     assert "started Prefect server" in out and "stopped (server stopped)" in out
@@ -65,3 +68,30 @@ def test_a_scheduler_that_ignores_the_stop_is_killed_after_the_grace_time(
     t0 = time.monotonic()
     assert app._wait_or_kill(child, [t0]) == -signal.SIGKILL
     assert time.monotonic() - t0 < 10
+
+
+def test_a_killed_scheduler_leaves_no_flow_run_behind(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scheduler leads its own session; a process it started (a flow run, here one that
+    ignores SIGINT and holds the output) is killed with it, not orphaned: an orphaned flow run
+    waited for ever on the stopped server and held ``serve``'s output open."""
+    from cli import app
+    from physanim.processes import process_alive
+
+    monkeypatch.setattr(app, "SERVE_STOP_GRACE_S", 0.5)
+    flow_run = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); time.sleep(60)"
+    code = (
+        "import signal, subprocess, sys, time; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+        f"p = subprocess.Popen([sys.executable, '-c', {flow_run!r}]); print(p.pid, flush=True); "
+        "time.sleep(60)"
+    )
+    child = subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, start_new_session=True
+    )
+    grandchild = int(child.stdout.readline())
+    child.send_signal(signal.SIGINT)  # ignored by both
+    assert app._wait_or_kill(child, [time.monotonic()]) == -signal.SIGKILL
+    deadline = time.monotonic() + 10
+    while process_alive(grandchild) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not process_alive(grandchild)
+    assert child.stdout.read() == ""  # the pipe closed: nothing holds it open
