@@ -96,6 +96,7 @@ def estimate_face_jaw(
         pivot_std_m=params.pivot_prior_std_m,
         axis_std_rad=np.radians(params.axis_prior_std_deg),
         noise_m=params.noise_m,
+        pivot_bound_std=params.pivot_bound_std,
     )
     if params.landmarks is not None:
         unknown = [n for n in params.landmarks if n not in names]

@@ -58,14 +58,16 @@ def _rotate(points: NDArray, pivot: NDArray, axis: NDArray, angle: NDArray) -> N
 @dataclass(frozen=True)
 class JawPrior:
     """Anatomical prior of the hinge: ``pivot`` (3,) m (the TMJ axis, behind the face) with
-    standard deviation ``pivot_std_m``; ``axis`` (3,) unit (the head's left-right axis) with
-    angular standard deviation ``axis_std_rad``; ``noise_m``: tracking noise per coordinate."""
+    standard deviation ``pivot_std_m``, and never farther than ``pivot_bound_std`` of them
+    from it in any coordinate; ``axis`` (3,) unit (the head's left-right axis) with angular
+    standard deviation ``axis_std_rad``; ``noise_m``: tracking noise per coordinate."""
 
     pivot: NDArray
     pivot_std_m: float = 0.01
     axis: NDArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
     axis_std_rad: float = 0.17
     noise_m: float = 5e-4
+    pivot_bound_std: float = 3.0
 
 
 def _axis_from(tilt: NDArray, base: NDArray) -> NDArray:
@@ -84,7 +86,10 @@ def estimate_jaw(points: NDArray, prior: JawPrior) -> JawMotion:
     must see them all).  Least squares over the pivot, the axis and every angle, with the
     anatomical ``prior`` on pivot and axis: points on the chin alone barely tell a turn about
     a far pivot from one about a nearer pivot with a larger angle, so the prior decides what
-    the data cannot.  Raises JawEstimateError on too few points.
+    the data cannot.  The pivot stays within the prior's bound: chin skin that moves while
+    the jaw stays (a lip press) was read as a 7 degree turn about a pivot 50 mm in front of
+    the TMJ, and the mandible, turned by it, pulled the lips.  Raises JawEstimateError on too
+    few points.
     """
     x = np.asarray(points, dtype=np.float64)
     if x.ndim != 3 or x.shape[2] != 3 or x.shape[1] < 2:
@@ -114,9 +119,11 @@ def estimate_jaw(points: NDArray, prior: JawPrior) -> JawMotion:
     # each frame's residuals depend on the 5 hinge parameters and that frame's angle only: a
     # sparse Jacobian (6 grouped differences instead of T + 4, no dense SVD of a
     # (3 K T) x (T + 4) matrix in the trust region, which took seconds on the demo)
+    reach = np.full(len(z0), np.inf)
+    reach[:3] = prior.pivot_bound_std * prior.pivot_std_m
     sol = least_squares(
         residuals, z0, x_scale="jac", jac_sparsity=_jaw_sparsity(rest.shape[0], n_t),
-        tr_solver="lsmr",
+        tr_solver="lsmr", bounds=(z0 - reach, z0 + reach),
     )  # fmt: skip
     pivot, axis, angle = unpack(sol.x)
     fitted = _rotate(rest, pivot, axis, angle)

@@ -95,6 +95,14 @@ class JawParams(BaseModel):
     pivot_prior_std_m: float = Field(
         0.01, gt=0.0, le=0.1, description="standard deviation of that prior, m"
     )
+    pivot_bound_std: float = Field(
+        3.0,
+        gt=0.0,
+        le=100.0,
+        description="the estimated pivot stays within this many pivot_prior_std_m of the prior "
+        "in each coordinate (chin skin moving while the jaw stays, as in a lip press, was read "
+        "as a turn about a pivot 50 mm in front of the TMJ)",
+    )
     axis_prior_std_deg: float = Field(
         10.0, gt=0.0, le=90.0, description="how far the hinge may tilt from left-right, deg"
     )

@@ -44,6 +44,22 @@ def test_jaw_rotation_recovered_from_noisy_landmarks_to_half_a_degree() -> None:
     assert jaw.residual_m.max() < 5e-4
 
 
+def test_the_pivot_stays_within_its_bound_when_the_chin_moves_without_the_jaw() -> None:
+    """Chin points pushed 3 mm forward with no turn at all (the skin of a lip press): left
+    free, the fit explains it as a turn about a pivot 50 mm in front of the TMJ; bounded to
+    3 standard deviations (30 mm) per coordinate, the pivot stays there and the turn it reads
+    is smaller."""
+    rng = np.random.default_rng(4)
+    ramp = np.sin(np.linspace(0.0, np.pi, 30)) ** 2
+    moved = CHIN[None] + ramp[:, None, None] * np.array([0.0, 0.0, 0.003])
+    moved[1:] += rng.normal(0.0, 1e-4, moved[1:].shape)
+    free = estimate_jaw(moved, JawPrior(pivot=PIVOT, pivot_bound_std=100.0))
+    bounded = estimate_jaw(moved, JawPrior(pivot=PIVOT))
+    assert np.abs(free.pivot - PIVOT).max() > 0.04
+    assert np.abs(bounded.pivot - PIVOT).max() <= 0.03 + 1e-9
+    assert np.abs(bounded.angle).max() < 0.8 * np.abs(free.angle).max()
+
+
 def test_jaw_estimate_refuses_unusable_points() -> None:
     with pytest.raises(JawEstimateError, match="K >= 2"):
         estimate_jaw(np.zeros((5, 1, 3)), JawPrior(pivot=PIVOT))
