@@ -16,7 +16,11 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    started from the same direction's flow of frame t - 1, so a large motion (a jaw drop on
    lips without painted dots) is reached in steps: the held-out vowels rendered without
    markers read 0.222 at the jaw drop with every flow started from rest, 0.199 so started
-   (0.151 with markers). The vertex's pixel at t is its neutral pixel plus the forward flow,
+   (0.151 with markers). The flow matches each image's local contrast, not its brightness
+   (:func:`flow_image`): skin that turns under the light gets brighter or darker, which led
+   brightness-matching flow astray (the library's RGB-D peaks: mean 0.119 -> 0.114; the held-out
+   vowels without markers 0.198 -> 0.128 at the jaw drop). The vertex's pixel at t is its
+   neutral pixel plus the forward flow,
    averaged with the backward flow's estimate (``flow_two_way``). Where the backward flow does not
    return it within ``max_flow_error_px`` (occlusion, the inside of the open mouth, flow
    failure) the vertex is not observed at t.
@@ -68,6 +72,13 @@ from physanim.tracking.tracks import head_poses, refine_poses_anisotropic
 
 #: About how many of the seen vertices (every k-th) re-estimate the head pose.
 POSE_POINTS = 3000
+#: Least local standard deviation (8-bit levels) that :func:`flow_image` divides by: flat,
+#: dark places (the open mouth's shadow) would otherwise become amplified sensor noise
+#: (with 2 levels and 8 px, the flow of jaw_side-s0 lost a lip corner for five frames).
+CONTRAST_FLOOR = 5.0
+#: 8-bit levels per local standard deviation in :func:`flow_image`'s output (about three
+#: deviations each side of mid-grey).
+CONTRAST_GAIN = 40.0
 
 
 @dataclass(frozen=True)
@@ -110,6 +121,20 @@ def blur_valid(values: NDArray, valid: NDArray, sigma_px: float) -> NDArray:
         out = num / den
     out[den < 0.5] = np.nan
     return out
+
+
+def flow_image(gray: NDArray, sigma_px: float) -> NDArray:
+    """The image (H, W) uint8 the flow matches: ``gray`` (H, W) uint8 itself, or with
+    ``sigma_px`` > 0 its local contrast (minus the local mean, over the local standard
+    deviation, both Gaussian over ``sigma_px``), which does not change where a turning surface
+    is lit more or less brightly. The standard deviation is floored at ``CONTRAST_FLOOR``."""
+    if sigma_px <= 0:
+        return np.ascontiguousarray(gray)
+    g = gray.astype(np.float32)
+    mean = cv2.GaussianBlur(g, (0, 0), sigma_px)
+    var = cv2.GaussianBlur(g * g, (0, 0), sigma_px) - mean * mean
+    z = (g - mean) / np.sqrt(np.maximum(var, 0.0) + CONTRAST_FLOOR**2)
+    return np.clip(128.0 + CONTRAST_GAIN * z, 0, 255).astype(np.uint8)
 
 
 def _project(points: NDArray, K: NDArray) -> NDArray:
@@ -331,7 +356,7 @@ def observe(
     x0, y0, x1, y1 = flow_window(
         vertices[view.seen], head_pose, K, gray0.shape, params.flow_margin_px
     )
-    gray0 = np.ascontiguousarray(gray0[y0:y1, x0:x1])
+    gray0 = flow_image(gray0[y0:y1, x0:x1], params.flow_normalise_px)
     K_window = K.copy()
     K_window[0, 2] -= x0
     K_window[1, 2] -= y0
@@ -346,7 +371,10 @@ def observe(
     def flows(
         t: int, pool: ThreadPoolExecutor, start: tuple[NDArray, NDArray] | None
     ) -> tuple[Future, Future]:
-        gray = cv2.cvtColor(np.asarray(color[t])[y0:y1, x0:x1], cv2.COLOR_RGB2GRAY)
+        gray = flow_image(
+            cv2.cvtColor(np.asarray(color[t])[y0:y1, x0:x1], cv2.COLOR_RGB2GRAY),
+            params.flow_normalise_px,
+        )
         f0, b0 = (None, None) if start is None else (start[0].copy(), start[1].copy())
         return (
             pool.submit(forward_dis.calc, gray0, gray, f0),

@@ -48,6 +48,12 @@ class DenseParams(BaseModel):
         description="DIS flow: smoothness weight of the variational refinement (OpenCV's "
         "alpha; its default 20 blurs the motion across the lip edges); 1",
     )
+    flow_normalise_px: float = Field(
+        4.0, ge=0.0, le=50.0,
+        description="the flow matches local contrast (the image minus its local mean over its "
+        "local standard deviation, Gaussian over this radius) instead of brightness, which "
+        "changes as the skin turns under the light (0: brightness); px",
+    )  # fmt: skip
     flow_two_way: bool = Field(
         True,
         description="a vertex's pixel at t is the mean of the forward flow's estimate and "
