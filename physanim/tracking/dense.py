@@ -17,13 +17,13 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    lips without painted dots) is reached in steps: the held-out vowels rendered without
    markers read 0.222 at the jaw drop with every flow started from rest, 0.199 so started
    (0.151 with markers). The flow matches each image's local contrast, not its brightness
-   (:func:`flow_image`): skin that turns under the light gets brighter or darker, which led
-   brightness-matching flow astray (the library's RGB-D peaks: mean 0.119 -> 0.114; the held-out
-   vowels without markers 0.198 -> 0.128 at the jaw drop). The vertex's pixel at t is its
-   neutral pixel plus the forward flow,
-   averaged with the backward flow's estimate (``flow_two_way``). Where the backward flow does not
-   return it within ``max_flow_error_px`` (occlusion, the inside of the open mouth, flow
-   failure) the vertex is not observed at t.
+   (:func:`flow_image`): skin that turns under the light grows brighter or darker, which led
+   brightness-matching flow astray (the library's RGB-D peaks: mean 0.119 -> 0.114; the
+   held-out vowels without markers 0.198 -> 0.128 at the jaw drop). The vertex's pixel at t
+   is its neutral pixel plus the forward flow, averaged with the backward flow's estimate
+   (``flow_two_way``). Where the backward flow does not return it within
+   ``max_flow_error_px`` (occlusion, the inside of the open mouth, flow failure) the vertex
+   is not observed at t.
 3. **Lift.** The depth at that pixel (Gaussian-smoothed with invalid pixels left out) gives
    the camera-frame point; motion towards the camera (a pucker) comes from depth directly.
 4. **Head pose.** Re-estimated from the dense points with the landmark tracker's robust
