@@ -21,9 +21,9 @@ class DenseParams(BaseModel):
         0, ge=0, le=3, description="DIS flow: finest pyramid level (0 = full resolution); count"
     )
     flow_patch_px: int = Field(
-        4, ge=4, le=32,
-        description="DIS flow: patch side (small patches blur less across the lips when the "
-        "mouth opens); px",
+        6, ge=4, le=32,
+        description="DIS flow: patch side in the enlarged image's pixels (flow_upsample; "
+        "small patches blur less across the lips when the mouth opens); px",
     )  # fmt: skip
     flow_margin_px: int = Field(
         32, ge=0, le=1000,
@@ -31,9 +31,9 @@ class DenseParams(BaseModel):
         "head poses, widened by this much on each side; px",
     )  # fmt: skip
     flow_stride_px: int = Field(
-        1, ge=1, le=16,
-        description="DIS flow: patch stride (1: a patch at every pixel, which follows the "
-        "lips' rolling where a stride of 2 lost them); px",
+        3, ge=1, le=16,
+        description="DIS flow: patch stride in the enlarged image's pixels (flow_upsample); "
+        "at the camera's pixels a stride of 2 lost the lips' rolling; px",
     )  # fmt: skip
     flow_iterations: int = Field(
         16, ge=1, le=200, description="DIS flow: gradient-descent iterations per patch; count"
@@ -48,6 +48,17 @@ class DenseParams(BaseModel):
         description="DIS flow: smoothness weight of the variational refinement (OpenCV's "
         "alpha; its default 20 blurs the motion across the lip edges); 1",
     )
+    flow_constancy_weight: float = Field(
+        0.5, ge=0.0, le=100.0,
+        description="DIS flow: weight of the variational refinement's brightness-constancy "
+        "term (OpenCV's delta; its gradient-constancy term weighs 10); 1",
+    )  # fmt: skip
+    flow_upsample: int = Field(
+        2, ge=1, le=4,
+        description="the images are enlarged by this factor (cubic) before the flow, whose "
+        "field is then averaged back to the camera's pixels; flow_patch_px and "
+        "flow_stride_px count the enlarged pixels; count",
+    )  # fmt: skip
     flow_normalise_px: float = Field(
         4.0, ge=0.0, le=50.0,
         description="the flow matches local contrast (the image minus its local mean over its "
