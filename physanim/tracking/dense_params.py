@@ -71,8 +71,21 @@ class DenseParams(BaseModel):
         "the backward flow's (the forward one moved back by half their disagreement); bool",
     )
     depth_sigma_px: float = Field(
-        2.5, ge=0.0, le=10.0, description="Gaussian smoothing of the depth before lifting; px"
-    )
+        2.5, ge=0.0, le=10.0,
+        description="Gaussian smoothing of the neutral frame's depth (the scan's registration "
+        "and the seen vertices' neutral positions); px",
+    )  # fmt: skip
+    depth_change_degree: int = Field(
+        2, ge=0, le=2,
+        description="the change of depth at a vertex's neutral pixel is read from a polynomial "
+        "of this degree fitted to the change around it (Gaussian weights over "
+        "depth_change_sigma_px): 0, a weighted mean, flattens a motion's peak (lips pushed "
+        "towards the camera) by about sigma^2 / 2 times its curvature, 2 follows it; count",
+    )  # fmt: skip
+    depth_change_sigma_px: float = Field(
+        4.5, gt=0.0, le=20.0,
+        description="Gaussian window of the depth change's fit (depth_change_degree); px",
+    )  # fmt: skip
     visible_tolerance_m: float = Field(
         0.004, gt=0.0, le=0.05,
         description="a vertex is seen in the neutral frame when its depth is this close to "
