@@ -22,7 +22,7 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    held-out vowels without markers 0.198 -> 0.128 at the jaw drop). The flow runs on the
    images enlarged twice (``flow_upsample``) with patches of 3 camera pixels, its field then
    averaged back to the camera's pixels: finer patches blur the skin's motion less where it
-   changes fast (the library's RGB-D peaks: mean 0.114 -> 0.111 on the performances it was
+   changes fast (the library's RGB-D peaks: mean 0.114 -> 0.110 on the performances it was
    chosen on, 0.117 -> 0.113 on the held-out ones). The vertex's pixel at t
    is its neutral pixel plus the forward flow, averaged with the backward flow's estimate
    (``flow_two_way``). Where the backward flow does not return it within
@@ -34,7 +34,8 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    pulled back by the flow, minus the neutral's) is read from a quadratic fitted to it
    around the pixel (:func:`physanim.tracking.local_fit.local_polynomial`,
    ``depth_change_degree``): a weighted mean flattened the peak of the lips' motion (the
-   library's RGB-D peaks: mean 0.110 -> 0.101 on the performances it was chosen on).
+   library's RGB-D peaks: mean 0.110 -> 0.100 on the performances it was chosen on, 0.113 ->
+   0.103 on the held-out ones).
 4. **Head pose.** Re-estimated from the dense points with the landmark tracker's robust
    weighted Kabsch (``physanim.tracking.tracks.head_poses``): points that ride rigidly with
    the head over the sequence dominate, so an expression does not tilt the head. Then
