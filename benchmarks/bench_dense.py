@@ -84,7 +84,7 @@ def measure(
     track_s = (time.perf_counter() - t0) / T
     face_found = float((found.tracks.confidence > 0).any(axis=1).mean())
 
-    params = config.section("dense", DenseParams)
+    params = config.section("dense", DenseParams).for_source(ingest.kind)  # as stage dense
     kinematic = np.asarray(align.kinematic[...], dtype=np.float64)
     vertices = align.scan_vertices
     t0 = time.perf_counter()

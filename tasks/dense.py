@@ -60,6 +60,7 @@ def compute(
     from physanim.tracking.dense import dense_track
 
     vertices = align.scan_vertices
+    params = params.for_source(ingest.kind)  # a stereo pair's depth wants a wider window
     prior = kinematic - vertices[None] if params.prior == "kinematic" else None
     dense = dense_track(
         ingest.color, ingest.depth, ingest.K, track.head_pose, vertices, align.scan_faces,
@@ -73,6 +74,7 @@ def compute(
         observed_fraction_median=round(float(np.median(observed)), 4),
         flow_error_px_median=round(float(np.nanmedian(dense.flow_error_px)), 3),
         seconds_per_frame=round(dense.seconds_per_frame, 3),
+        depth_change_sigma_px=params.depth_change_sigma_px,
         unfolded_vertex_frames=dense.unfolded,
     )
     if dense.registration is not None:

@@ -75,7 +75,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from physanim.mesh.topology import uniform_laplacian, vertex_normals
-from physanim.tracking.dense_params import DenseParams
+from physanim.tracking.dense_params import DEPTH_CHANGE_SIGMA_PX, DenseParams
 from physanim.tracking.lift import backproject, sample
 from physanim.tracking.local_fit import local_polynomial
 from physanim.tracking.register import Registration, register_to_depth
@@ -267,7 +267,7 @@ def _frame_points(
     consistent = np.hypot(*np.moveaxis(forward + returned, -1, 0)) < params.max_flow_error_px
     change = pulled - view.raw_depth
     valid = np.isfinite(change) & consistent
-    sigma = params.depth_change_sigma_px
+    sigma = params.depth_change_sigma_px or DEPTH_CHANGE_SIGMA_PX["depth"]
     if params.depth_change_degree == 0:
         z = view.z + sample(blur_valid(change, valid, sigma), view.uv)
     else:
@@ -360,7 +360,9 @@ def observe(
     time), intrinsics ``K`` (3, 3) px and the landmark tracker's ``head_pose`` (T, 4, 4)
     camera <- actor. Frame 0 is the neutral. With ``params.register_scan`` the scan is
     registered to the neutral depth and every tracker pose gets the correction of frame 0's;
-    a registration that keeps fewer than half the scan's facing points is not applied."""
+    a registration that keeps fewer than half the scan's facing points is not applied. An
+    unset ``depth_change_sigma_px`` is the depth frames' (``DenseParams.for_source`` sets a
+    recording's)."""
     T = color.shape[0]
     start = time.perf_counter()
     gray0 = cv2.cvtColor(np.asarray(color[0]), cv2.COLOR_RGB2GRAY)

@@ -6,6 +6,11 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+#: ``depth_change_sigma_px`` (px) where it is not set, by the kind of depth: measured (a bag,
+#: an RGBD folder) or from a stereo pair (chosen on the library's tuning performances: the
+#: pair's peaks 0.156 -> 0.147 at 6.5 px, its RGB-D peaks best at 4.5).
+DEPTH_CHANGE_SIGMA_PX = {"depth": 4.5, "stereo": 6.5}
+
 
 class DenseParams(BaseModel):
     """Optical flow on colour + depth per frame -> motion of every scan vertex."""
@@ -82,9 +87,11 @@ class DenseParams(BaseModel):
         "depth_change_sigma_px): 0, a weighted mean, flattens a motion's peak (lips pushed "
         "towards the camera) by about sigma^2 / 2 times its curvature, 2 follows it; count",
     )  # fmt: skip
-    depth_change_sigma_px: float = Field(
-        4.5, gt=0.0, le=20.0,
-        description="Gaussian window of the depth change's fit (depth_change_degree); px",
+    depth_change_sigma_px: float | None = Field(
+        None, gt=0.0, le=20.0,
+        description="Gaussian window of the depth change's fit (depth_change_degree); unset: "
+        "4.5 from depth frames (a bag, an RGBD folder), 6.5 from a stereo pair, whose depth "
+        "is noisier; px",
     )  # fmt: skip
     visible_tolerance_m: float = Field(
         0.004, gt=0.0, le=0.05,
@@ -148,3 +155,11 @@ class DenseParams(BaseModel):
         "2 or more both at once (0: one per core; no more than 2 are used, as each frame's "
         "flow starts from the frame before's); count",
     )  # fmt: skip
+
+    def for_source(self, kind: str) -> DenseParams:
+        """These parameters for a recording of ``kind`` ('bag', 'rgbd' or 'stereo'): an unset
+        ``depth_change_sigma_px`` takes that kind's default (``DEPTH_CHANGE_SIGMA_PX``)."""
+        if self.depth_change_sigma_px is not None:
+            return self
+        sigma = DEPTH_CHANGE_SIGMA_PX["stereo" if kind == "stereo" else "depth"]
+        return self.model_copy(update={"depth_change_sigma_px": sigma})

@@ -14,7 +14,7 @@ import pytest
 from numpy.typing import NDArray
 
 from physanim.tracking.dense import dense_track, flow_window, smooth_depth
-from physanim.tracking.dense_params import DenseParams
+from physanim.tracking.dense_params import DEPTH_CHANGE_SIGMA_PX, DenseParams
 from physanim.tracking.lift import backproject
 
 skimage_data = pytest.importorskip("skimage.data")
@@ -343,3 +343,15 @@ def test_the_depth_change_keeps_the_peak_of_a_narrow_bump(recording):
           f"quadratic {errors[2] * 1e3:.2f} mm")  # fmt: skip
     assert errors[0] > 0.5e-3  # the mean flattens the peak: about 1 mm of 4
     assert errors[2] < 0.35 * errors[0]  # measured 0.21 mm: the bump's fourth-order part
+
+
+def test_the_depth_change_window_follows_the_source_unless_set():
+    """A stereo pair's depth is noisier than a depth camera's: an unset window of the depth
+    change's fit takes the wider default there; a window that is set stays."""
+    params = DenseParams()
+    assert params.depth_change_sigma_px is None
+    assert params.for_source("stereo").depth_change_sigma_px == DEPTH_CHANGE_SIGMA_PX["stereo"]
+    for kind in ("bag", "rgbd"):
+        assert params.for_source(kind).depth_change_sigma_px == DEPTH_CHANGE_SIGMA_PX["depth"]
+    assert DEPTH_CHANGE_SIGMA_PX["stereo"] > DEPTH_CHANGE_SIGMA_PX["depth"]
+    assert DenseParams(depth_change_sigma_px=3.0).for_source("stereo").depth_change_sigma_px == 3.0
