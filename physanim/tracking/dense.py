@@ -51,10 +51,12 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    see, else 0: observed motion is smoothed over ``smoothing_m`` and every unobserved vertex
    is filled harmonically from its neighbours, an unseen one following the prior's shape
    (the seam keeps the lips apart). Observations farther than ``outlier_m`` from the
-   smoothed field are dropped and the field solved again. Then a Gaussian over time
-   (``temporal_sigma_frames``). Where the prior folds the surface over unseen vertices
-   (the kinematic scan at the inner mouth corner in a smile), those vertices follow their
-   neighbours' motion instead (:func:`unfold_unseen`).
+   smoothed field are dropped and the field solved again. Then each vertex's motion is
+   smoothed over time by a quadratic fitted around each frame (``temporal_degree``,
+   ``temporal_sigma_frames``): a Gaussian mean flattened the expressions' peaks. Where the
+   prior folds the surface over unseen vertices (the kinematic scan at the inner mouth
+   corner in a smile), those vertices follow their neighbours' motion instead
+   (:func:`unfold_unseen`).
 
 The confidence (T, N) is 1 where a vertex was observed and kept, 0 where it was filled: a
 filled vertex is marked, never silently guessed.
@@ -72,12 +74,11 @@ import cv2
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.ndimage import gaussian_filter1d
 
 from physanim.mesh.topology import uniform_laplacian, vertex_normals
 from physanim.tracking.dense_params import DEPTH_CHANGE_SIGMA_PX, DenseParams
 from physanim.tracking.lift import backproject, sample
-from physanim.tracking.local_fit import local_polynomial
+from physanim.tracking.local_fit import local_polynomial, polynomial_in_time
 from physanim.tracking.register import Registration, register_to_depth
 from physanim.tracking.tracks import head_poses, refine_poses_anisotropic
 
@@ -500,10 +501,9 @@ def fill_motion(
     displacement = base + fit.transpose(1, 0, 2)
     confidence = np.zeros((T, n), dtype=np.float32)
     confidence[:, seen_idx] = keep.T
-    if params.temporal_sigma_frames > 0:
-        displacement = gaussian_filter1d(
-            displacement, params.temporal_sigma_frames, axis=0, mode="nearest"
-        )
+    displacement = polynomial_in_time(
+        displacement, params.temporal_sigma_frames, params.temporal_degree
+    )
     displacement, unfolded = unfold_unseen(displacement, vertices, faces, obs.seen, laplacian)
     return displacement.astype(np.float32), confidence, unfolded
 

@@ -111,7 +111,7 @@ class DenseParams(BaseModel):
         description="observed motion this far from its smoothed neighbourhood is rejected; m",
     )  # fmt: skip
     smoothing_m: float = Field(
-        0.001, ge=0.0, le=0.05,
+        0.0005, ge=0.0, le=0.05,
         description="length over which the motion is smoothed on the scan surface (gaps "
         "are filled from their neighbours over any distance); m",
     )  # fmt: skip
@@ -126,8 +126,17 @@ class DenseParams(BaseModel):
         "kinematic scan's motion plus their neighbours' correction",
     )
     temporal_sigma_frames: float = Field(
-        1.0, ge=0.0, le=10.0, description="Gaussian smoothing of the motion over time; frames"
-    )
+        2.5, ge=0.0, le=10.0,
+        description="Gaussian window of the motion's fit over time (temporal_degree; 0: not "
+        "smoothed over time); frames",
+    )  # fmt: skip
+    temporal_degree: int = Field(
+        2, ge=0, le=2,
+        description="each vertex's motion over time is smoothed by a polynomial of this "
+        "degree fitted around each frame (Gaussian weights over temporal_sigma_frames): 0, "
+        "a weighted mean, flattens an expression's peak by about sigma^2 / 2 times its "
+        "second derivative in time, 2 follows it; count",
+    )  # fmt: skip
     register_scan: bool = Field(
         True,
         description="register the scan to the neutral frame's depth (ICP from the landmark "

@@ -1,4 +1,5 @@
-"""Local polynomial regression of an image over its valid pixels, read at sub-pixel points.
+"""Local polynomial regression: of an image over its valid pixels, read at sub-pixel points
+(:func:`local_polynomial`), and of a sequence over time (:func:`polynomial_in_time`).
 
 A Gaussian-weighted mean (normalised convolution) of a field that curves is biased towards
 its surroundings by about sigma^2 / 2 times its Laplacian: the depth change of lips pushed
@@ -7,7 +8,8 @@ pixel offsets, fitted by the same weights, removes that bias to first or second 
 (Savitzky-Golay in two dimensions, with missing pixels); the price is more noise, so it wants
 a wider window. The weighted moments are separable Gaussian-times-monomial filters
 (OpenCV's ``sepFilter2D``), so the fit costs a few filters per image and one small solve per
-point.
+point. Over time the same holds for an expression's peak, flattened by a Gaussian mean over
+frames by about sigma^2 / 2 times its second derivative in time.
 """
 
 from __future__ import annotations
@@ -70,3 +72,30 @@ def local_polynomial(
     fitted[enough] = (coef * at).sum(axis=1)
     out[inside] = fitted
     return out
+
+
+def polynomial_in_time(values: NDArray, sigma_frames: float, degree: int) -> NDArray:
+    """``values`` (T, ...) smoothed along their first axis: at each frame t the value at t of
+    the polynomial of ``degree`` (0-2) in the frame offset fitted, with Gaussian weights of
+    ``sigma_frames`` over +-3 sigma, to the frames within the sequence (a window that a
+    sequence's end cuts is fitted one-sided). Degree 0 is a Gaussian-weighted mean; degree 2
+    follows a peak's curvature (Savitzky-Golay with Gaussian weights). ``sigma_frames`` 0
+    returns ``values`` unchanged."""
+    if not 0 <= degree <= 2:
+        raise ValueError(f"polynomial_in_time: degree must be 0, 1 or 2, got {degree}")
+    values = np.asarray(values)
+    n = values.shape[0]
+    if sigma_frames <= 0 or n < 2:
+        return values
+    half = int(np.ceil(3.0 * sigma_frames))
+    # the (T, T) linear filter: row t holds the weights that give the fit's value at t
+    weights = np.zeros((n, n))
+    for t in range(n):
+        frames = np.arange(max(0, t - half), min(n, t + half + 1))
+        offset = (frames - t).astype(np.float64)
+        g = np.exp(-(offset**2) / (2.0 * sigma_frames**2))
+        basis = np.vander(offset, min(degree, len(frames) - 1) + 1, increasing=True)
+        gram = basis.T @ (g[:, None] * basis)
+        weights[t, frames] = np.linalg.solve(gram, basis.T * g)[0]
+    flat = values.reshape(n, -1)
+    return (weights @ flat).reshape(values.shape).astype(values.dtype, copy=False)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physanim.tracking.local_fit import local_polynomial
+from physanim.tracking.local_fit import local_polynomial, polynomial_in_time
 
 H, W, SIGMA = 60, 80, 3.0
 
@@ -66,3 +66,30 @@ def test_too_few_valid_pixels_give_nan():
     )
     with pytest.raises(ValueError, match="degree"):
         local_polynomial(values, valid, SIGMA, right, degree=3)
+
+
+def test_the_fit_over_time_follows_a_peak_the_gaussian_mean_flattens():
+    """A vertex's motion peaking as a parabola in time, 3 mm high with second derivative
+    -0.05 mm per frame^2: the Gaussian mean (degree 0) lowers the peak by sigma^2 / 2 times
+    that (0.156 mm at 2.5 frames); the quadratic is exact everywhere, the sequence's cut
+    windows at both ends included, and it leaves a quadratic in every vertex and axis."""
+    t = np.arange(40, dtype=np.float64)
+    peak = 3.0 - 0.025 * (t - 20.0) ** 2  # mm
+    sigma = 2.5
+    mean = polynomial_in_time(peak, sigma, degree=0)
+    assert mean[20] - peak[20] == pytest.approx(-(sigma**2) / 2 * 0.05, rel=0.02)
+    np.testing.assert_allclose(polynomial_in_time(peak, sigma, degree=2), peak, atol=1e-9)
+    # (T, N, 3): each vertex and axis is smoothed along time alone
+    rng = np.random.default_rng(2)
+    coef = rng.normal(size=(3, 5, 3))
+    motion = coef[0] + coef[1] * t[:, None, None] + coef[2] * 0.01 * t[:, None, None] ** 2
+    smoothed = polynomial_in_time(motion.astype(np.float32), sigma, degree=2)
+    assert smoothed.dtype == np.float32 and smoothed.shape == motion.shape
+    np.testing.assert_allclose(smoothed, motion, atol=1e-4)
+    # white noise comes out smaller (the point of smoothing), a line stays a line at degree 1
+    noise = rng.normal(size=(200, 1000))
+    assert polynomial_in_time(noise, sigma, degree=2)[20:-20].std() < 0.6
+    np.testing.assert_allclose(polynomial_in_time(2.0 * t, sigma, degree=1), 2.0 * t, atol=1e-9)
+    assert polynomial_in_time(peak, 0.0, degree=2) is peak
+    with pytest.raises(ValueError, match="degree"):
+        polynomial_in_time(peak, sigma, degree=3)
