@@ -64,7 +64,7 @@ def compute(
     prior = kinematic - vertices[None] if params.prior == "kinematic" else None
     dense = dense_track(
         ingest.color, ingest.depth, ingest.K, track.head_pose, vertices, align.scan_faces,
-        params, prior, ctx.progress("dense"),
+        params, prior, ctx.progress("dense"), fps=float(ingest.fps),
     )  # fmt: skip
     observed = dense.confidence.mean(axis=1)
     summary = dict(

@@ -125,15 +125,15 @@ class DenseParams(BaseModel):
         description="what unobserved vertices follow: their neighbours' motion only, or the "
         "kinematic scan's motion plus their neighbours' correction",
     )
-    temporal_sigma_frames: float = Field(
-        2.5, ge=0.0, le=10.0,
-        description="Gaussian window of the motion's fit over time (temporal_degree; 0: not "
-        "smoothed over time); frames",
+    temporal_sigma_s: float = Field(
+        0.083, ge=0.0, le=1.0,
+        description="Gaussian window of the motion's fit over time (temporal_degree; 2.5 "
+        "frames at 30 fps; 0: not smoothed over time); s",
     )  # fmt: skip
     temporal_degree: int = Field(
         2, ge=0, le=2,
         description="each vertex's motion over time is smoothed by a polynomial of this "
-        "degree fitted around each frame (Gaussian weights over temporal_sigma_frames): 0, "
+        "degree fitted around each frame (Gaussian weights over temporal_sigma_s): 0, "
         "a weighted mean, flattens an expression's peak by about sigma^2 / 2 times its "
         "second derivative in time, 2 follows it; count",
     )  # fmt: skip

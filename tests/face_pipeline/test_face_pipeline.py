@@ -135,13 +135,13 @@ def test_skull_holds_the_mandible_turns_and_the_actuation_moves_the_skin(demo_ru
 
 def test_the_simulated_face_performs_the_capture(demo_run) -> None:
     """Against the demo's ground truth, on the fixed coarse mesh (measured: the FEM mouth opens
-    by 3.0 mm against the actor's 9.3 mm, as the 6 mm actuation patches span the 7 mm tets'
-    lips; relative displacement error 0.44 at the jaw drop and 0.32 at the smile; peak /
+    by 5.3 mm against the actor's 9.3 mm, as the 6 mm actuation patches span the 7 mm tets'
+    lips; relative displacement error 0.135 at the jaw drop and 0.111 at the smile; peak /
     99th-percentile stress 2.30; the moved scan's silhouette against the truth's, worst frame,
-    front / side: FEM 0.983 / 0.976, captured scan 0.988 / 0.981): the mouth opens, the
-    errors stay within 0.06 of those figures, no
-    hot spot, no flap or tear in the outline. The fitted actuation's errors against the
-    captured scan's and the springs': tests/face_pipeline/test_actuation_drive.py."""
+    front / side: FEM 0.992 / 0.987): the mouth opens by at least 45 % of the actor's, the
+    errors stay within 0.06 of those figures, no hot spot, no flap or tear in the outline.
+    The fitted actuation's errors against the captured scan's and the springs':
+    tests/face_pipeline/test_actuation_drive.py."""
     _, _, store, _, keys = demo_run
     summary = store.provenance("evaluate", keys["evaluate"])["summary"]
     evaluated = store.open("evaluate", keys["evaluate"])
@@ -150,8 +150,8 @@ def test_the_simulated_face_performs_the_capture(demo_run) -> None:
     message = f"lip gap {gap}, opening {opened}, fidelity {fidelity}"
     print(message, "surfaces", summary["surfaces"])
     assert opened["truth"] > 3.0, message  # the actor's mouth opens by millimetres
-    assert opened["fem"] > 0.25 * opened["truth"], message
-    assert fidelity["jaw_open"]["overall"] < 0.50 and fidelity["smile"]["overall"] < 0.38, message
+    assert opened["fem"] > 0.45 * opened["truth"], message
+    assert fidelity["jaw_open"]["overall"] < 0.20 and fidelity["smile"]["overall"] < 0.17, message
     stress = store.provenance("simulate", keys["simulate"])["summary"]["peak_to_p99_von_mises"]
     print("stress ratio", stress)
     assert stress <= 3.0, stress
@@ -192,8 +192,8 @@ def test_regional_models_act_where_they_are_edited(model_sweep) -> None:
     each node's peak displacement from model 2's, averaged over the right philtrum's free
     nodes, is several times its average over the free nodes 20 mm or more from that region,
     and larger than the left philtrum's, which borders it. On the fixed coarse mesh: model 3's
-    right philtrum peak +10.7 % over model 2's (asserted: 2.5 %, the landmark springs' +3.2 %),
-    the mean node change +9.4 % there (asserted: 4 %), +7.1 % in the left philtrum, 0.40 % far
+    right philtrum peak +9.8 % over model 2's (asserted: 2.5 %, the landmark springs' +3.2 %),
+    the mean node change +9.0 % there (asserted: 4 %), +6.9 % in the left philtrum, 0.31 % far
     away."""
     from physanim.names import name_index
 

@@ -20,6 +20,7 @@ from physanim.tracking.lift import backproject
 skimage_data = pytest.importorskip("skimage.data")
 
 SIZE, T, F_PX = 256, 30, 500.0
+FPS = 30.0  # frame rate of the warped recordings, 1/s
 K = np.array([[F_PX, 0.0, SIZE / 2], [0.0, F_PX, SIZE / 2], [0.0, 0.0, 1.0]])
 
 
@@ -76,10 +77,10 @@ def test_dense_capture_recovers_a_known_warp_of_a_real_photo(recording):
     vertices = backproject(uv0, neutral_depth(uv0), K)
     # the pose is known: no registration (a bump on a plane would let ICP turn about the axis)
     params = DenseParams(
-        refine_head_pose=False, register_scan=False, temporal_sigma_frames=0.0, smoothing_m=0.001
+        refine_head_pose=False, register_scan=False, temporal_sigma_s=0.0, smoothing_m=0.001
     )
     pose = np.tile(np.eye(4), (T, 1, 1))
-    dense = dense_track(color, depth, K, pose, vertices, faces, params)
+    dense = dense_track(color, depth, K, pose, vertices, faces, params, fps=FPS)
     assert dense.seen.all()
     px_err, mm_err = [], []
     for t in range(T):
@@ -106,9 +107,10 @@ def test_unobserved_vertices_are_marked_and_filled_from_neighbours(recording):
     depth[t, 100:140, 100:140] = np.nan
     vertices = backproject(uv0, neutral_depth(uv0), K)
     params = DenseParams(
-        refine_head_pose=False, register_scan=False, temporal_sigma_frames=0.0, prior="none"
+        refine_head_pose=False, register_scan=False, temporal_sigma_s=0.0, prior="none"
     )
-    dense = dense_track(color, depth, K, np.tile(np.eye(4), (T, 1, 1)), vertices, faces, params)
+    pose = np.tile(np.eye(4), (T, 1, 1))
+    dense = dense_track(color, depth, K, pose, vertices, faces, params, fps=FPS)
     shift, dz = warp(uv0, t)
     at = uv0 + shift  # where the vertices are in frame t
     hole = ((at > 104) & (at < 136)).all(axis=1)
@@ -148,12 +150,12 @@ def test_each_frames_flow_starts_from_the_frame_befores_in_its_direction(recordi
             return out
 
     vertices = backproject(uv0, neutral_depth(uv0), K)
-    params = DenseParams(refine_head_pose=False, register_scan=False, temporal_sigma_frames=0.0)
+    params = DenseParams(refine_head_pose=False, register_scan=False, temporal_sigma_s=0.0)
     pose = np.tile(np.eye(4), (T, 1, 1))
     runs = {}
     for cold in (False, True):
         monkeypatch.setattr(dense_module, "_flow_engine", lambda p, c=cold: Recorded(engine(p), c))
-        runs[cold] = dense_track(color, depth, K, pose, vertices, faces, params)
+        runs[cold] = dense_track(color, depth, K, pose, vertices, faces, params, fps=FPS)
     forward, backward = engines[:2]  # the warm run's engines
     for calls in (forward.calls, backward.calls):
         assert len(calls) == T and calls[0][0] is None
@@ -225,8 +227,8 @@ def test_the_frames_unfold_what_the_prior_folds_and_fill_what_they_do_not_see():
     obs = DenseObservations(
         seen, true[:, seen], np.zeros((2, int(seen.sum()))), np.tile(np.eye(4), (2, 1, 1)), 0.0
     )
-    params = DenseParams(temporal_sigma_frames=0.0, smoothing_m=0.001)
-    displacement, confidence, unfolded = fill_motion(obs, vertices, faces, params, prior)
+    params = DenseParams(temporal_sigma_s=0.0, smoothing_m=0.001)
+    displacement, confidence, unfolded = fill_motion(obs, vertices, faces, params, prior, fps=FPS)
     np.testing.assert_array_equal(confidence[1], seen)
     ring = (np.abs(vertices[:, :2] - 0.015) <= 0.0041).all(axis=1)
     err = np.linalg.norm(displacement[1] - true[1], axis=1)
@@ -267,10 +269,10 @@ def test_the_flow_follows_the_skin_where_its_shading_changes(recording):
         ("default", {}),
     ):
         params = DenseParams(
-            refine_head_pose=False, register_scan=False, temporal_sigma_frames=0.0,
+            refine_head_pose=False, register_scan=False, temporal_sigma_s=0.0,
             smoothing_m=0.001, **flow,
         )  # fmt: skip
-        dense = dense_track(lit, depth, K, pose, vertices, faces, params)
+        dense = dense_track(lit, depth, K, pose, vertices, faces, params, fps=FPS)
         px = []
         for t in range(T):
             moved = _pixels(vertices + dense.displacement[t])
@@ -292,11 +294,11 @@ def test_the_flow_on_enlarged_images_reports_camera_pixels(recording):
     medians = {}
     for upsample, patch, stride in ((1, 4, 1), (2, 6, 3), (3, 8, 4)):
         params = DenseParams(
-            refine_head_pose=False, register_scan=False, temporal_sigma_frames=0.0,
+            refine_head_pose=False, register_scan=False, temporal_sigma_s=0.0,
             smoothing_m=0.001, flow_upsample=upsample, flow_patch_px=patch,
             flow_stride_px=stride,
         )  # fmt: skip
-        dense = dense_track(color, depth, K, pose, vertices, faces, params)
+        dense = dense_track(color, depth, K, pose, vertices, faces, params, fps=FPS)
         px = [
             np.linalg.norm(_pixels(vertices + dense.displacement[t]) - (uv0 + warp(uv0, t)[0]),
                            axis=1)
@@ -330,11 +332,11 @@ def test_the_depth_change_keeps_the_peak_of_a_narrow_bump(recording):
     errors = {}
     for degree in (0, 2):
         params = DenseParams(
-            refine_head_pose=False, register_scan=False, temporal_sigma_frames=0.0,
+            refine_head_pose=False, register_scan=False, temporal_sigma_s=0.0,
             smoothing_m=0.0, depth_change_degree=degree,
         )  # fmt: skip
         dense = dense_track(
-            still, depth.astype(np.float32), K, pose, vertices, faces, params
+            still, depth.astype(np.float32), K, pose, vertices, faces, params, fps=FPS
         )  # fmt: skip
         true = backproject(uv0, neutral_depth(uv0) + bump(uv0, t), K)
         got = vertices + dense.displacement[t]
