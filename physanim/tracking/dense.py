@@ -78,7 +78,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from physanim.mesh.topology import uniform_laplacian, vertex_normals
-from physanim.tracking.dense_params import DEPTH_CHANGE_SIGMA_PX, DenseParams
+from physanim.tracking.dense_params import DenseParams
 from physanim.tracking.lift import backproject, sample
 from physanim.tracking.local_fit import local_polynomial, polynomial_in_time
 from physanim.tracking.register import Registration, register_to_depth
@@ -270,7 +270,7 @@ def _frame_points(
     consistent = np.hypot(*np.moveaxis(forward + returned, -1, 0)) < params.max_flow_error_px
     change = pulled - view.raw_depth
     valid = np.isfinite(change) & consistent
-    sigma = params.depth_change_sigma_px or DEPTH_CHANGE_SIGMA_PX["depth"]
+    sigma = params.depth_change_sigma_px  # resolved by observe (DenseParams.for_source)
     if params.depth_change_degree == 0:
         z = view.z + sample(blur_valid(change, valid, sigma), view.uv)
     else:
@@ -366,6 +366,7 @@ def observe(
     a registration that keeps fewer than half the scan's facing points is not applied. An
     unset ``depth_change_sigma_px`` is the depth frames' (``DenseParams.for_source`` sets a
     recording's)."""
+    params = params.for_source("rgbd")  # leaves a set depth_change_sigma_px as it is
     T = color.shape[0]
     start = time.perf_counter()
     gray0 = cv2.cvtColor(np.asarray(color[0]), cv2.COLOR_RGB2GRAY)
