@@ -44,7 +44,13 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    vertex to about 0.2 mm in the image; its depth change errs by 0.5-0.8 mm), and a cheek
    puffed towards the camera moves only in depth; counted in full, it tilted the pose by
    0.8 degrees from a stereo pair (cheeks-s0's puff: 0.295 -> 0.186 with the weight 0.1).
-5. **Fill and smooth.** Per frame, the displacement field u minimises
+5. **The neutral frame's error.** Every frame's depth change and flow are read against the
+   neutral frame, so that frame's own noise (0.12 mm RMS in depth from the library's RGB-D
+   frames) is shared by all of them, and smoothing over time cannot lower it. Where a vertex
+   rests (:func:`neutral_error`) its observed motion is that shared error plus the frame's
+   own; their mean over its rest frames is subtracted from every frame (the library's RGB-D
+   peaks the settings were chosen on: mean 0.091 -> 0.085).
+6. **Fill and smooth.** Per frame, the displacement field u minimises
    ``sum_i c_i |u_i - u_obs_i|^2 + lam * sum_edges |(u_i - u_j) - w_ij (p_i - p_j)|^2`` over
    the (lip-cut) scan graph, c_i = 1 where observed, p the prior (the kinematic scan's
    motion, or 0) and w_ij = 1 on the edges that touch a vertex the neutral frame does not
@@ -76,6 +82,7 @@ import cv2
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
+from scipy.ndimage import minimum_filter1d
 
 from physanim.mesh.topology import uniform_laplacian, vertex_normals
 from physanim.tracking.dense_params import DenseParams
@@ -459,6 +466,50 @@ def observe(
     )  # fmt: skip
 
 
+def neutral_error(
+    obs: DenseObservations, faces: NDArray, params: DenseParams, edge_m: float, fps: float
+) -> NDArray:
+    """The error (S, 3) m that the observed motion of the seen vertices shares in every frame
+    after the neutral: the neutral frame's own (its depth and colour, read once, enter
+    each frame's depth change and flow).
+
+    A seen vertex is at rest in frame t >= 1 where its observed motion, smoothed over
+    ``rest_smoothing_m`` on the scan (normalised over the observed vertices) and over a
+    frame in time, stays below ``rest_factor`` times that smoothed motion's noise in every
+    frame within ``rest_margin_s`` of t (the margin keeps a motion's slow start and end
+    out). The noise is the median over vertices and frames of its second difference over
+    time / sqrt(6) (0.05-0.06 mm from the library's RGB-D frames): it does not assume that
+    most of the face rests, which a median of the motion would (a warp of the whole image
+    then read as rest). There its true motion is about 0 and its observed motion the shared
+    error plus that frame's own, so their mean over its rest frames estimates the shared
+    one; a vertex with no rest frame gets 0. ``edge_m`` the scan's median edge length (m),
+    ``fps`` the frame rate (1/s)."""
+    T, S = obs.displacement.shape[:2]
+    observed = np.isfinite(obs.displacement).all(axis=2)[1:]  # (T - 1, S)
+    if params.rest_factor <= 0.0 or not observed.any():
+        return np.zeros((S, 3))
+    from physanim.fem.linsolve import factorize_many
+
+    values = np.where(observed[..., None], obs.displacement[1:], 0.0)
+    lam = (params.rest_smoothing_m / edge_m) ** 2
+    smoother = sp.identity(S) + lam * _induced_laplacian(faces, obs.seen)
+    columns = np.concatenate([values.transpose(1, 0, 2).reshape(S, -1), observed.T], axis=1)
+    smooth = factorize_many(sp.csc_matrix(smoother))(columns.astype(np.float64))
+    share = np.maximum(smooth[:, 3 * (T - 1) :], 1e-6)  # (S, T - 1)
+    local = smooth[:, : 3 * (T - 1)].reshape(S, T - 1, 3) / share[..., None]
+    motion = np.linalg.norm(polynomial_in_time(local.transpose(1, 0, 2), 1.0, 0), axis=2)
+    both = observed[2:] & observed[1:-1] & observed[:-2]
+    second = np.linalg.norm(local[:, 2:] - 2 * local[:, 1:-1] + local[:, :-2], axis=2).T
+    # the motion's own second differences are small at camera frame rates
+    noise = np.median(second[both]) / np.sqrt(6.0) if both.any() else 0.0
+    still = motion < params.rest_factor * noise
+    margin = int(round(params.rest_margin_s * fps))
+    rest = observed & minimum_filter1d(still, 2 * margin + 1, axis=0, mode="nearest")
+    count = rest.sum(axis=0)
+    total = (values * rest[..., None]).sum(axis=0)
+    return np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], 0.0)
+
+
 def fill_motion(
     obs: DenseObservations,
     vertices: NDArray,
@@ -469,7 +520,7 @@ def fill_motion(
     fps: float,
 ) -> tuple[NDArray, NDArray, int]:
     """Displacement (T, N, 3) float32 m and confidence (T, N) float32 of every scan vertex
-    from the observations (step 5 of the module docstring), and how many (frame, vertex)
+    from the observations (steps 5 and 6 of the module docstring), and how many (frame, vertex)
     pairs :func:`unfold_unseen` filled anew; ``fps`` the frame rate (1/s) that turns
     ``temporal_sigma_s`` into frames. With a ``prior`` (T, N, 3) m
     (the kinematic scan's motion), the observed departure from it fills the vertices no frame
@@ -480,7 +531,12 @@ def fill_motion(
     raise (106 triangles turned over on brows-s1), and the observations there, 0.14 mm from
     the truth, could not unfold it through a smoothed departure (86 stayed turned)."""
     T, n = obs.displacement.shape[0], len(vertices)
-    lam = max((params.smoothing_m / _edge_length(vertices, faces)) ** 2, 1e-3)
+    edge = _edge_length(vertices, faces)
+    lam = max((params.smoothing_m / edge) ** 2, 1e-3)
+    shared = neutral_error(obs, faces, params, edge, fps)
+    observed_motion = obs.displacement.copy()
+    observed_motion[1:] -= shared
+    obs = replace(obs, displacement=observed_motion)
     laplacian = uniform_laplacian(faces, n)
     solve = _smoother(laplacian, obs.seen, lam)
     towards_unseen = _laplacian_of_edges_touching(laplacian, ~obs.seen)

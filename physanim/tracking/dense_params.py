@@ -115,6 +115,26 @@ class DenseParams(BaseModel):
         description="length over which the motion is smoothed on the scan surface (gaps "
         "are filled from their neighbours over any distance); m",
     )  # fmt: skip
+    rest_factor: float = Field(
+        5.5, ge=0.0, le=100.0,
+        description="a seen vertex rests in a frame where its observed motion, smoothed "
+        "over rest_smoothing_m on the scan and a frame in time, is below this times that "
+        "smoothed motion's noise per frame (from its second differences over time); the "
+        "mean of its observed motion over its rest frames (the neutral frame's own depth "
+        "and flow error, which every frame shares) is subtracted from every frame (0: "
+        "off); 1",
+    )  # fmt: skip
+    rest_margin_s: float = Field(
+        0.067, ge=0.0, le=1.0,
+        description="a frame counts as rest (rest_factor) only where the frames within this "
+        "time are too, so a motion's slow start and end are not taken for rest (2 frames at "
+        "30 fps); s",
+    )  # fmt: skip
+    rest_smoothing_m: float = Field(
+        0.002, gt=0.0, le=0.05,
+        description="length over which the observed motion is smoothed on the scan to tell "
+        "rest from motion (rest_factor); m",
+    )  # fmt: skip
     fill_iterations: int = Field(
         2, ge=1, le=20,
         description="fill passes: each smooths the kept observations and drops those "

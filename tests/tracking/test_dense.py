@@ -241,6 +241,78 @@ def test_the_frames_unfold_what_the_prior_folds_and_fill_what_they_do_not_see():
     assert not whole.any() and 0 < unfolded <= unseen.sum()
 
 
+def _grid(n: int) -> tuple[NDArray, NDArray]:
+    """An n x n grid of 1 mm spacing in the z = 0 plane: vertices (n^2, 3) m, faces."""
+    g = np.arange(n) * 1e-3
+    gx, gy = np.meshgrid(g, g)
+    vertices = np.stack([gx.ravel(), gy.ravel(), np.zeros(n * n)], 1)
+    idx = np.arange(n * n).reshape(n, n)
+    quads = np.stack([idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]], -1).reshape(-1, 4)
+    return vertices, np.concatenate([quads[:, [0, 2, 1]], quads[:, [0, 3, 2]]])
+
+
+def _smooth_noise(rng: np.random.Generator, points: NDArray, rms: NDArray) -> NDArray:
+    """A smooth random field (P, 3) m at ``points`` (P, 3) m: per coordinate, a sum of 8 plane
+    waves 5-15 mm long in random directions and phases, of RMS ``rms`` (3,) m (a depth
+    camera's error after the depth change's local fit: correlated over a few mm)."""
+    out = np.zeros((len(points), 3))
+    for c in range(3):
+        angle = rng.uniform(0, 2 * np.pi, 8)
+        k = 2 * np.pi / rng.uniform(0.005, 0.015, 8)
+        phase = rng.uniform(0, 2 * np.pi, 8)
+        waves = np.cos(
+            points[:, :1] * (k * np.cos(angle)) + points[:, 1:2] * (k * np.sin(angle)) + phase
+        )
+        out[:, c] = waves.sum(axis=1) * rms[c] / 2.0  # 8 unit waves: RMS 2
+    return out
+
+
+def test_the_neutral_frames_error_is_taken_out_where_the_skin_rests():
+    """Each frame t of a 40 x 40 mm grid is observed with a smooth error e_t (0.1 mm RMS,
+    mostly in depth), against the neutral frame, which has its own: the motion observed is
+    the true one plus e_t - e_0, and e_0 is shared by every frame. A bump rises 2 mm and
+    falls back over frames 10-25 of 60; one corner moves 1 mm from frame 1 on and never
+    rests. The shared error is recovered to its expected spread over about 45 rest frames
+    (0.1 / sqrt(45) = 0.015 mm) wherever the skin rests in some frames (the bump too,
+    outside its motion), the corner gets none (its motion is kept, not taken for error), and
+    the filled motion's error at the bump's peak falls to half."""
+    from physanim.tracking.dense import DenseObservations, fill_motion, neutral_error
+
+    n, T = 41, 60
+    vertices, faces = _grid(n)
+    rng = np.random.default_rng(3)
+    rms = np.array([0.03, 0.03, 0.09]) * 1e-3
+    errors_t = np.stack([_smooth_noise(rng, vertices, rms) for _ in range(T)])
+    ramp = np.clip(np.sin(np.pi * (np.arange(T) - 10) / 15), 0, None) * (np.arange(T) <= 25)
+    bump = np.exp(-(((vertices[:, :2] - 0.02) / 0.008) ** 2).sum(axis=1))
+    true = np.zeros((T, n * n, 3))
+    true[:, :, 2] = -0.002 * ramp[:, None] * bump[None]
+    corner = (vertices[:, :2] > 0.032).all(axis=1)
+    true[1:, corner, 0] = 0.001
+    observed = true + errors_t - errors_t[0]
+    seen = np.ones(n * n, dtype=bool)
+    poses = np.tile(np.eye(4), (T, 1, 1))
+    obs = DenseObservations(seen, observed, np.zeros((T, n * n)), poses, 0.0)
+    params, edge = DenseParams(), 1e-3
+    found = neutral_error(obs, faces, params, edge, FPS)
+    rests = ~(vertices[:, :2] > 0.029).all(axis=1)  # 3 mm from the corner's motion
+    err = np.linalg.norm(found[rests] + errors_t[0, rests], axis=1)
+    assert np.sqrt((err**2).mean()) < 2.5e-5  # measured 0.016 mm
+    assert not found[corner].any()
+    off = params.model_copy(update={"rest_factor": 0.0})
+    assert not neutral_error(obs, faces, off, edge, FPS).any()
+    peak = int(np.argmax(ramp))
+    errors = []
+    for p in (off, params):
+        fitted, _, _ = fill_motion(obs, vertices, faces, p, fps=FPS)
+        e = np.linalg.norm(fitted[peak, rests] - true[peak, rests], axis=1)
+        errors.append(np.sqrt((e**2).mean()))
+    assert errors[1] < 0.5 * errors[0], errors  # measured 0.097 -> 0.040 mm
+    # from frame 6: the fit over time rounds the corner's step at frame 1
+    kept = fitted[6:, corner & (vertices[:, :2] > 0.036).all(axis=1), 0]
+    assert np.allclose(kept, 0.001, atol=1e-4)
+
+
 def test_the_flow_follows_the_skin_where_its_shading_changes(recording):
     """The light falls on a turning surface more or less brightly: each frame's colour is
     scaled by a smooth gain that grows over the bump (to 1.4 times at the peak, darker on its
