@@ -21,7 +21,11 @@ from tasks.ingest import IngestOutput
 from tasks.track import TrackOutput
 
 if TYPE_CHECKING:
+    from physanim.tracking.dense import NeutralError
     from physanim.tracking.register import Registration
+
+#: warn when less of the seen skin than this rests in any frame after the neutral one
+RESTING_FRACTION_WARNING = 0.5
 
 
 @dataclass(frozen=True)
@@ -77,12 +81,38 @@ def compute(
         depth_change_sigma_px=params.depth_change_sigma_px,
         unfolded_vertex_frames=dense.unfolded,
     )
+    parts = []
+    if dense.neutral is not None and params.rest_factor > 0:
+        parts.append(_neutral_summary(dense.neutral))
     if dense.registration is not None:
-        summary.update(_registration_summary(dense.registration, track.head_pose[0]))
+        parts.append(_registration_summary(dense.registration, track.head_pose[0]))
+    warnings = [w for part in parts for w in part.pop("warnings", [])]
+    for part in parts:
+        summary.update(part)
+    if warnings:
+        summary["warnings"] = warnings
     motion = (vertices[None] + dense.displacement).astype(np.float32)
     return DenseOutput(
         motion, dense.confidence, dense.head_pose, dense.flow_error_px, "dense", summary=summary
     )
+
+
+def _neutral_summary(neutral: NeutralError) -> dict[str, object]:
+    """The neutral frame's error taken out of the dense motion (RMS, mm), the share of the
+    seen skin that rests in some later frame and, when that is under
+    ``RESTING_FRACTION_WARNING``, a warning."""
+    out: dict[str, object] = dict(
+        neutral_error_rms_mm=round(neutral.rms_m * 1e3, 4),
+        resting_fraction=round(neutral.resting_fraction, 4),
+    )
+    if neutral.resting_fraction < RESTING_FRACTION_WARNING:
+        out["warnings"] = [
+            f"only {neutral.resting_fraction:.0%} of the skin the neutral frame sees rests in "
+            "any later frame: the rest keeps the neutral frame's own depth and flow error in "
+            "every frame (0.1 mm or so from a depth camera); record a moment of neutral face "
+            "after the first frame, or check that frame 0 shows the neutral face"
+        ]
+    return out
 
 
 def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[str, object]:
@@ -109,6 +139,6 @@ def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[s
 SPEC = StageSpec.typed(
     "dense",
     compute,
-    version="7",
+    version="8",
     doc="captured motion of every scan vertex: dense capture (flow + depth) or the kinematic scan",
 )

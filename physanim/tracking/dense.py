@@ -49,7 +49,8 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    frames) is shared by all of them, and smoothing over time cannot lower it. Where a vertex
    rests (:func:`neutral_error`) its observed motion is that shared error plus the frame's
    own; their mean over its rest frames is subtracted from every frame (the library's RGB-D
-   peaks the settings were chosen on: mean 0.091 -> 0.085).
+   peaks: mean 0.091 -> 0.084 on the performances it was chosen on, 0.093 -> 0.084 on the
+   held-out ones).
 6. **Fill and smooth.** Per frame, the displacement field u minimises
    ``sum_i c_i |u_i - u_obs_i|^2 + lam * sum_edges |(u_i - u_j) - w_ij (p_i - p_j)|^2`` over
    the (lip-cut) scan graph, c_i = 1 where observed, p the prior (the kinematic scan's
@@ -103,6 +104,16 @@ CONTRAST_GAIN = 40.0
 
 
 @dataclass(frozen=True)
+class NeutralError:
+    """What :func:`without_neutral_error` took out: the ``rms_m`` of the shared error over the
+    seen vertices that rest in some frame (m), and the ``resting_fraction`` of the seen
+    vertices that do (the others keep their observed motion)."""
+
+    rms_m: float
+    resting_fraction: float
+
+
+@dataclass(frozen=True)
 class DenseMotion:
     """Dense capture of T frames of N scan vertices.
 
@@ -112,7 +123,8 @@ class DenseMotion:
     frame; ``flow_error_px`` (T,) median forward-backward flow disagreement of the seen
     vertices; ``seconds_per_frame`` wall time of the flow, lifting and filling per frame;
     ``registration`` of the scan to the neutral depth (None when not asked for);
-    ``unfolded`` how many (frame, vertex) pairs :func:`unfold_unseen` filled anew.
+    ``unfolded`` how many (frame, vertex) pairs :func:`unfold_unseen` filled anew;
+    ``neutral`` the neutral frame's error taken out (:func:`without_neutral_error`).
     """
 
     displacement: NDArray
@@ -123,6 +135,7 @@ class DenseMotion:
     seconds_per_frame: float
     registration: Registration | None = None
     unfolded: int = 0
+    neutral: NeutralError | None = None
 
 
 def smooth_depth(depth: NDArray, sigma_px: float) -> NDArray:
@@ -468,10 +481,10 @@ def observe(
 
 def neutral_error(
     obs: DenseObservations, faces: NDArray, params: DenseParams, edge_m: float, fps: float
-) -> NDArray:
+) -> tuple[NDArray, NDArray]:
     """The error (S, 3) m that the observed motion of the seen vertices shares in every frame
     after the neutral: the neutral frame's own (its depth and colour, read once, enter
-    each frame's depth change and flow).
+    each frame's depth change and flow); and how many frames each vertex rests in (S,).
 
     A seen vertex is at rest in frame t >= 1 where its observed motion, smoothed over
     ``rest_smoothing_m`` on the scan (normalised over the observed vertices) and over a
@@ -487,7 +500,7 @@ def neutral_error(
     T, S = obs.displacement.shape[:2]
     observed = np.isfinite(obs.displacement).all(axis=2)[1:]  # (T - 1, S)
     if params.rest_factor <= 0.0 or not observed.any():
-        return np.zeros((S, 3))
+        return np.zeros((S, 3)), np.zeros(S, dtype=np.int64)
     from physanim.fem.linsolve import factorize_many
 
     values = np.where(observed[..., None], obs.displacement[1:], 0.0)
@@ -507,7 +520,22 @@ def neutral_error(
     rest = observed & minimum_filter1d(still, 2 * margin + 1, axis=0, mode="nearest")
     count = rest.sum(axis=0)
     total = (values * rest[..., None]).sum(axis=0)
-    return np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], 0.0)
+    return np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], 0.0), count
+
+
+def without_neutral_error(
+    obs: DenseObservations, vertices: NDArray, faces: NDArray, params: DenseParams, *, fps: float
+) -> tuple[DenseObservations, NeutralError]:
+    """The observations with :func:`neutral_error` taken out of every frame after the
+    neutral (step 5 of the module docstring), for the scan ``vertices`` (N, 3) m / ``faces``
+    (F, 3) at ``fps`` frames per second."""
+    shared, count = neutral_error(obs, faces, params, _edge_length(vertices, faces), fps)
+    motion = np.array(obs.displacement, dtype=np.float64)
+    motion[1:] -= shared
+    rests = count > 0
+    rms = float(np.sqrt((shared[rests] ** 2).sum(axis=1).mean())) if rests.any() else 0.0
+    resting = float(rests.mean()) if len(rests) else 0.0
+    return replace(obs, displacement=motion), NeutralError(rms, resting)
 
 
 def fill_motion(
@@ -520,7 +548,7 @@ def fill_motion(
     fps: float,
 ) -> tuple[NDArray, NDArray, int]:
     """Displacement (T, N, 3) float32 m and confidence (T, N) float32 of every scan vertex
-    from the observations (steps 5 and 6 of the module docstring), and how many (frame, vertex)
+    from the observations (step 6 of the module docstring), and how many (frame, vertex)
     pairs :func:`unfold_unseen` filled anew; ``fps`` the frame rate (1/s) that turns
     ``temporal_sigma_s`` into frames. With a ``prior`` (T, N, 3) m
     (the kinematic scan's motion), the observed departure from it fills the vertices no frame
@@ -531,12 +559,7 @@ def fill_motion(
     raise (106 triangles turned over on brows-s1), and the observations there, 0.14 mm from
     the truth, could not unfold it through a smoothed departure (86 stayed turned)."""
     T, n = obs.displacement.shape[0], len(vertices)
-    edge = _edge_length(vertices, faces)
-    lam = max((params.smoothing_m / edge) ** 2, 1e-3)
-    shared = neutral_error(obs, faces, params, edge, fps)
-    observed_motion = obs.displacement.copy()
-    observed_motion[1:] -= shared
-    obs = replace(obs, displacement=observed_motion)
+    lam = max((params.smoothing_m / _edge_length(vertices, faces)) ** 2, 1e-3)
     laplacian = uniform_laplacian(faces, n)
     solve = _smoother(laplacian, obs.seen, lam)
     towards_unseen = _laplacian_of_edges_touching(laplacian, ~obs.seen)
@@ -631,14 +654,16 @@ def dense_track(
     *,
     fps: float,
 ) -> DenseMotion:
-    """Dense motion of the scan: :func:`observe` then :func:`fill_motion` (arguments there)."""
+    """Dense motion of the scan: :func:`observe`, :func:`without_neutral_error`, then
+    :func:`fill_motion` (arguments there)."""
     obs = observe(color, depth, K, head_pose, vertices, faces, params, progress)
     start = time.perf_counter()
+    obs, neutral = without_neutral_error(obs, vertices, faces, params, fps=fps)
     displacement, confidence, unfolded = fill_motion(obs, vertices, faces, params, prior, fps=fps)
     with np.errstate(invalid="ignore"):
         flow_error = np.nanmedian(obs.flow_error_px, axis=1)
     seconds = obs.seconds + time.perf_counter() - start
     return DenseMotion(
         displacement, confidence, obs.head_pose, obs.seen, flow_error, seconds / color.shape[0],
-        obs.registration, unfolded,
+        obs.registration, unfolded, neutral,
     )  # fmt: skip

@@ -276,7 +276,12 @@ def test_the_neutral_frames_error_is_taken_out_where_the_skin_rests():
     (0.1 / sqrt(45) = 0.015 mm) wherever the skin rests in some frames (the bump too,
     outside its motion), the corner gets none (its motion is kept, not taken for error), and
     the filled motion's error at the bump's peak falls to half."""
-    from physanim.tracking.dense import DenseObservations, fill_motion, neutral_error
+    from physanim.tracking.dense import (
+        DenseObservations,
+        fill_motion,
+        neutral_error,
+        without_neutral_error,
+    )
 
     n, T = 41, 60
     vertices, faces = _grid(n)
@@ -294,20 +299,25 @@ def test_the_neutral_frames_error_is_taken_out_where_the_skin_rests():
     poses = np.tile(np.eye(4), (T, 1, 1))
     obs = DenseObservations(seen, observed, np.zeros((T, n * n)), poses, 0.0)
     params, edge = DenseParams(), 1e-3
-    found = neutral_error(obs, faces, params, edge, FPS)
+    found, resting = neutral_error(obs, faces, params, edge, FPS)
     rests = ~(vertices[:, :2] > 0.029).all(axis=1)  # 3 mm from the corner's motion
     err = np.linalg.norm(found[rests] + errors_t[0, rests], axis=1)
     assert np.sqrt((err**2).mean()) < 2.5e-5  # measured 0.016 mm
-    assert not found[corner].any()
+    assert not found[corner].any() and not resting[corner].any()
+    assert (resting[rests] >= 20).all()  # the bump's vertices rest in about 40 of 59 frames
     off = params.model_copy(update={"rest_factor": 0.0})
-    assert not neutral_error(obs, faces, off, edge, FPS).any()
+    assert not neutral_error(obs, faces, off, edge, FPS)[0].any()
     peak = int(np.argmax(ramp))
     errors = []
     for p in (off, params):
-        fitted, _, _ = fill_motion(obs, vertices, faces, p, fps=FPS)
+        taken, neutral = without_neutral_error(obs, vertices, faces, p, fps=FPS)
+        fitted, _, _ = fill_motion(taken, vertices, faces, p, fps=FPS)
         e = np.linalg.norm(fitted[peak, rests] - true[peak, rests], axis=1)
         errors.append(np.sqrt((e**2).mean()))
     assert errors[1] < 0.5 * errors[0], errors  # measured 0.097 -> 0.040 mm
+    # all but the corner and the skin within the smoothing's reach of it
+    assert rests.mean() - 0.01 <= neutral.resting_fraction < 1.0 - corner.mean()
+    assert neutral.rms_m == pytest.approx(np.sqrt((errors_t[0] ** 2).sum(axis=1).mean()), rel=0.2)
     # from frame 6: the fit over time rounds the corner's step at frame 1
     kept = fitted[6:, corner & (vertices[:, :2] > 0.036).all(axis=1), 0]
     assert np.allclose(kept, 0.001, atol=1e-4)
@@ -429,3 +439,32 @@ def test_the_depth_change_window_follows_the_source_unless_set():
         assert params.for_source(kind).depth_change_sigma_px == DEPTH_CHANGE_SIGMA_PX["depth"]
     assert DEPTH_CHANGE_SIGMA_PX["stereo"] > DEPTH_CHANGE_SIGMA_PX["depth"]
     assert DenseParams(depth_change_sigma_px=3.0).for_source("stereo").depth_change_sigma_px == 3.0
+
+
+def test_a_face_that_never_rests_after_the_neutral_frame_is_warned_about():
+    """The whole grid moves from frame 1 on (a sway that never returns): no vertex rests, so
+    nothing is taken out and the dense stage's summary warns; the same grid that stays
+    still after frame 0 rests everywhere and gets no warning."""
+    from physanim.tracking.dense import DenseObservations, without_neutral_error
+    from tasks.dense import _neutral_summary
+
+    n, T = 21, 30
+    vertices, faces = _grid(n)
+    rng = np.random.default_rng(5)
+    noise = np.stack([_smooth_noise(rng, vertices, np.full(3, 0.05e-3)) for _ in range(T)])
+    sway = 0.002 * np.sin(np.pi * np.arange(T) / (T - 1) / 2)  # 0 -> 2 mm, never back
+    poses = np.tile(np.eye(4), (T, 1, 1))
+    for motion, rests in ((sway, False), (0.0 * sway, True)):
+        observed = noise - noise[0]
+        observed[:, :, 0] += motion[:, None]
+        obs = DenseObservations(np.ones(n * n, bool), observed, np.zeros((T, n * n)), poses, 0.0)
+        taken, neutral = without_neutral_error(obs, vertices, faces, DenseParams(), fps=FPS)
+        summary = _neutral_summary(neutral)
+        if rests:
+            assert neutral.resting_fraction > 0.95 and "warnings" not in summary
+        else:
+            assert (
+                neutral.resting_fraction < 0.05
+                and "rests in any later frame" in summary["warnings"][0]
+            )
+            np.testing.assert_allclose(taken.displacement, observed, atol=2e-5)
