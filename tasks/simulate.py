@@ -181,7 +181,7 @@ def compute(
 SPEC = StageSpec.typed(
     "simulate",
     compute,
-    version="10",
+    version="11",
     doc="viscoelastic FEM (Newmark); skull fixed, mandible turned by the estimated jaw, skin "
     "moved by the fitted actuation (default) or pulled by the tracked landmarks (drive.mode)",
 )

@@ -18,11 +18,12 @@ from numpy.typing import NDArray
 def unit_activity(au: NDArray, au_names: Sequence[str], units: Sequence[str]) -> NDArray:
     """(T,) in [0, 1]: per frame, the largest activity of the action ``units`` among the fit's
     ``au`` (T, n_au) named ``au_names``, each unit's curve scaled from its least (0) to its
-    largest (1) value over the run (a unit that does not vary is 0 throughout), squared: a
-    soft gate that keeps the peak and leaves at a tenth the fit's leak of a unit into other
-    expressions (the demo's lip corner pullers stand at 0.2-0.3 of their peak in the jaw drop;
-    unsquared, "smile x1.5" still turned 32 tets there, squared 15 with 14 held). ValueError
-    names the units the fit does not have."""
+    largest (1) value over the run (a unit that does not vary is 0 throughout), to the fourth
+    power: a soft gate that keeps the peak and leaves at a hundredth the fit's leak of a unit
+    into other expressions (the demo's lip corner pullers stand at 0.2-0.33 of their peak in
+    the jaw drop; unsquared, "smile x1.5" still turned 32 tets there, squared 15 with 14 held;
+    on the capture of 2026-12-07, squared 155 with 128 held, to the fourth 128, the mouth
+    corners' peaks the same). ValueError names the units the fit does not have."""
     names = list(au_names)
     unknown = [u for u in units if u not in names]
     if unknown:
@@ -34,7 +35,7 @@ def unit_activity(au: NDArray, au_names: Sequence[str], units: Sequence[str]) ->
     curves = au[:, [names.index(u) for u in units]]
     low, span = curves.min(axis=0), np.ptp(curves, axis=0)
     scaled = np.where(span > 1e-9, (curves - low) / np.where(span > 1e-9, span, 1.0), 0.0)
-    return scaled.max(axis=1, initial=0.0) ** 2
+    return scaled.max(axis=1, initial=0.0) ** 4
 
 
 def gesture_factors(factors: NDArray, activity: NDArray | None) -> NDArray:

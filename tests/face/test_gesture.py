@@ -11,7 +11,7 @@ from physanim.face.gesture import gesture_factors, unit_activity
 NAMES = ["jaw_drop", "lip_corner_puller_L", "lip_corner_puller_R", "brow_lowerer"]
 
 
-def test_activity_is_the_strongest_unit_scaled_from_rest_to_peak_and_squared() -> None:
+def test_activity_is_the_strongest_unit_scaled_from_rest_to_peak_to_the_fourth() -> None:
     au = np.array(
         [
             [0.0, 0.1, 0.2, 0.3],  # rest
@@ -22,7 +22,7 @@ def test_activity_is_the_strongest_unit_scaled_from_rest_to_peak_and_squared() -
         ]
     )
     got = unit_activity(au, NAMES, ["lip_corner_puller_L", "lip_corner_puller_R"])
-    np.testing.assert_allclose(got, [0.0, 0.0, 0.25, 1.0, 0.25])
+    np.testing.assert_allclose(got, [0.0, 0.0, 0.0625, 1.0, 0.0625])
     assert np.all(unit_activity(au, NAMES, ["brow_lowerer"]) == 0.0)  # never moves: never on
     assert np.all(unit_activity(au, NAMES, []) == 0.0)
 

@@ -110,7 +110,7 @@ def test_a_material_edit_acts_through_the_held_actuation(actuated) -> None:
 def test_the_smile_gesture_raises_the_mouth_corners(actuated) -> None:
     """``-c configs/gestures/smile_x1.5.yaml``: the actuation of the mouth, the cheeks and
     under the nose x1.5, where the fit's lip corner pullers are active, raises both mouth
-    corners' displacement at the smile peak (measured on the coarse demo: +44 and +43 %; at
+    corners' displacement at the smile peak (measured on the coarse demo: +43 and +42 %; at
     most +50 %, the jaw's and the other regions' shares staying; asserted 35-60 %), and reuses
     the inverse step."""
     data, _ = actuated
