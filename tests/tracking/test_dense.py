@@ -211,12 +211,8 @@ def test_the_frames_unfold_what_the_prior_folds_and_fill_what_they_do_not_see():
     from physanim.tracking.dense import DenseObservations, fill_motion
 
     n = 31
-    g = np.arange(n) * 1e-3
-    gx, gy = np.meshgrid(g, g)
-    vertices = np.stack([gx.ravel(), gy.ravel(), np.zeros(n * n)], 1)
+    vertices, faces = _grid(n)
     idx = np.arange(n * n).reshape(n, n)
-    quads = np.stack([idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]], -1).reshape(-1, 4)
-    faces = np.concatenate([quads[:, [0, 2, 1]], quads[:, [0, 3, 2]]])
     centre = (vertices[:, :2] - 0.015) / 0.008
     true = np.zeros((2, n * n, 3))
     true[1, :, 2] = -0.002 * np.exp(-(centre**2).sum(axis=1))
