@@ -81,6 +81,7 @@ def face_run(
         kinematic=dense.motion,
         times=simulate.times,
         fps=track.fps,
+        inverted_count=np.asarray(simulate.inverted_count),
     )
 
 
@@ -116,7 +117,7 @@ def compute(
 SPEC = StageSpec.typed(
     "evaluate",
     compute,
-    version="17",
+    version="18",
     doc="symmetry cost, mouth corners, lags (free behind driven, FEM behind capture per "
     "region), philtrum peaks; with truth: motion fidelity per "
     "region, lip gap, surface distance, silhouettes and triangle stretch of the moved scan",
