@@ -244,8 +244,9 @@ class ActuationParams(BaseModel):
     lip_patches: bool = Field(
         False,
         description="give each lip actuation patches of its own (none spans the lip seam, "
-        "so the lips move apart more freely; demo: jaw-drop error 0.158 -> 0.142, but 65-137 "
-        "lower-lip tets invert); false: patches by distance alone",
+        "so the lips move apart more freely; demo: the jaw drop's error over the captured "
+        "scan's +0.036 -> +0.023, but its lower lip's inverted tets 128 -> 253); false: "
+        "patches by distance alone",
     )
     filled_weight: float = Field(
         0.5,
