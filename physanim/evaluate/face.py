@@ -83,7 +83,7 @@ class FaceRun:
     ``scan_vertices`` (N, 3) m, ``scan_faces`` (F, 3), ``scan_side`` (N,), ``scan_parent``
     (N,) the uncut vertex of each, ``kinematic`` (T, N, 3) m (a Zarr array or numpy array,
     read by rows); ``times`` (T,) s of the frames; ``fps`` frames/s; ``inverted_count`` (T,)
-    how many tets the simulation turned inside out in each frame (None: not known).
+    how many tets the simulation turned inside out in each frame.
     """
 
     landmark_names: list[str]
@@ -107,7 +107,7 @@ class FaceRun:
     kinematic: Any
     times: NDArray
     fps: float
-    inverted_count: NDArray | None = None
+    inverted_count: NDArray
 
 
 @dataclass(frozen=True)
@@ -324,8 +324,8 @@ def _against_truth(
             name: round(float(gap[f]) * 1e3, 3) for name, f in peaks.items()
         }
     out["lip_gap_mm"]["truth"] = {n: round(float(true_gap[f]) * 1e3, 3) for n, f in peaks.items()}
-    if run.inverted_count is not None:  # an edit's price where it acts (a smile's gesture)
-        out["inverted_tets_at_peaks"] = {n: int(run.inverted_count[f]) for n, f in peaks.items()}
+    # an edit's price where it acts (a smile's gesture at the smile)
+    out["inverted_tets_at_peaks"] = {n: int(run.inverted_count[f]) for n, f in peaks.items()}
 
     # the RMS point-to-surface distance (blind to sliding and to a shut mouth)
     frames = list(range(0, disp.shape[0], params.error_every_frames))
