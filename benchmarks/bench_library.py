@@ -5,8 +5,9 @@ For each selected performance of ``physanim.capture.library`` (the held-out part
 it runs ``physanim run -p face --dataset <root>/<performance>-s<seed>[-coarse]`` (the run
 generates a missing dataset from its name first) and reads the evaluate stage's summary:
 at each expression's peak frame, the relative displacement error (0: moves like the truth,
-1: does not move) of the kinematic scan and of the FEM skin, overall and per facial region.
-Printed as a table and recorded in ``benchmarks/results/bench_library.json``.
+1: does not move) of the kinematic scan and of the FEM skin, overall and per facial region,
+and the tets the simulation turned inside out there. Printed as tables and recorded in
+``benchmarks/results/bench_library.json``.
 
 The full library at 90 frames takes long (a face pipeline run per dataset): choose the part,
 ``--only`` some performances, and ``--coarse`` (24 frames) with a coarse config to try it.
@@ -31,6 +32,7 @@ from physanim.store import StageStore
 
 PARTS = {"held-out": HELD_OUT, "tuning": TUNING, "all": PERFORMANCE_NAMES}
 COLUMNS = ["performance", "peak", "frame", "region", "kinematic_rel_error", "fem_rel_error"]
+INVERTED_COLUMNS = ["performance", "peak", "frame", "inverted_tets"]
 
 
 def run_pipeline(dataset: Path, configs: list[str], sets: list[str]) -> float:
@@ -55,6 +57,13 @@ def peak_rows(performance: str, summary: dict[str, Any]) -> list[list[Any]]:
     return rows
 
 
+def inverted_rows(performance: str, summary: dict[str, Any]) -> list[list[Any]]:
+    """Table rows (``INVERTED_COLUMNS``) of one run's evaluate summary: the tets the
+    simulation turned inside out at each peak."""
+    at_peaks = summary["inverted_tets_at_peaks"]
+    return [[performance, p, f, at_peaks[p]] for p, f in summary["peak_frames"].items()]
+
+
 def fmt(x: float | None) -> str:
     return "    -" if x is None else f"{x:5.2f}"
 
@@ -74,13 +83,16 @@ def main() -> None:
     names = args.only or PARTS[args.part]
 
     rows: list[list[Any]] = []
+    inverted: list[list[Any]] = []
     walls: dict[str, float] = {}
     for name in names:
         dataset = args.root / dataset_name(name, args.seed, coarse=args.coarse)
         print(f"{name}: physanim run on {dataset} ...", flush=True)
         walls[name] = run_pipeline(dataset, args.config, args.sets)
         store = StageStore(dataset / "runs" / "store.zarr", create=False)
-        rows += peak_rows(name, dict(store.open("evaluate").attrs)["summary"])
+        summary = dict(store.open("evaluate").attrs)["summary"]
+        rows += peak_rows(name, summary)
+        inverted += inverted_rows(name, summary)
 
     regions = list(dict.fromkeys(r[3] for r in rows))
     print(f"\nrelative displacement error at each peak, kinematic / FEM (seed {args.seed}"
@@ -91,6 +103,8 @@ def main() -> None:
         cells = {r[3]: (r[4], r[5]) for r in rows if (r[0], r[1], r[2]) == key}
         line = "  ".join(f"{fmt(cells[r][0])} / {fmt(cells[r][1])}" for r in regions)
         print(f"{key[0]:<10s} {key[1]:<13s} {key[2]:5d}  {line}")
+    print("\ntets turned inside out at each peak: " + ", ".join(
+        f"{name} {peak} {count}" for name, peak, _, count in inverted))  # fmt: skip
 
     overall = [r for r in rows if r[3] == "overall"]
 
@@ -108,6 +122,7 @@ def main() -> None:
                 rows,
                 reference="the dataset's ground truth (evaluate stage)",
             ),
+            Table("tets turned inside out at each peak", INVERTED_COLUMNS, inverted),
             Table("pipeline runs", ["performance", "wall_s"], [[n, walls[n]] for n in names]),
         ],
         **describe(__doc__, "bench_library"),
