@@ -117,7 +117,10 @@ def simulate_inputs(
         if params.drive.actuation_scale_with:
             from physanim.face.gesture import unit_activity
 
-            activity = unit_activity(fit.au, fit.au_names, params.drive.actuation_scale_with)
+            activity = unit_activity(
+                fit.au, fit.au_names, params.drive.actuation_scale_with,
+                params.drive.actuation_scale_full_span,
+            )  # fmt: skip
         problem = problem.with_actuation(actuate.actuation(tetra, params.drive, activity))
     return problem, drive
 
@@ -181,7 +184,7 @@ def compute(
 SPEC = StageSpec.typed(
     "simulate",
     compute,
-    version="11",
+    version="12",
     doc="viscoelastic FEM (Newmark); skull fixed, mandible turned by the estimated jaw, skin "
     "moved by the fitted actuation (default) or pulled by the tracked landmarks (drive.mode)",
 )

@@ -15,15 +15,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 
-def unit_activity(au: NDArray, au_names: Sequence[str], units: Sequence[str]) -> NDArray:
+def unit_activity(
+    au: NDArray, au_names: Sequence[str], units: Sequence[str], full_span: float
+) -> NDArray:
     """(T,) in [0, 1]: per frame, the largest activity of the action ``units`` among the fit's
     ``au`` (T, n_au) named ``au_names``, each unit's curve scaled from its least (0) to its
-    largest (1) value over the run (a unit that does not vary is 0 throughout), to the fourth
-    power: a soft gate that keeps the peak and leaves at a hundredth the fit's leak of a unit
-    into other expressions (the demo's lip corner pullers stand at 0.2-0.33 of their peak in
-    the jaw drop; unsquared, "smile x1.5" still turned 32 tets there, squared 15 with 14 held;
-    on the capture of 2026-12-07, squared 155 with 128 held, to the fourth 128, the mouth
-    corners' peaks the same). ValueError names the units the fit does not have."""
+    largest (1) value over the run, or over ``full_span`` (action units) where it varies less
+    (a unit that does not vary is 0 throughout), to the fourth power: a soft gate that keeps
+    the peak and leaves at a hundredth the fit's leak of a unit into other expressions (the
+    demo's lip corner pullers stand at 0.2-0.33 of their peak in the jaw drop; unsquared,
+    "smile x1.5" still turned 32 tets there, squared 15 with 14 held; on the capture of
+    2026-12-07, squared 155 with 128 held, to the fourth 128, the mouth corners' peaks the
+    same). The ``full_span`` keeps a performance without the expression from reading the
+    leak as its peak: over the library the lip corner pullers' leak spans at most 0.19
+    (jaw_side, whose jaw drop "smile x1.5" scaled by 1.18 and turned 26 tets there), a smile
+    0.40-1.03. ValueError names the units the fit does not have."""
     names = list(au_names)
     unknown = [u for u in units if u not in names]
     if unknown:
@@ -34,7 +40,7 @@ def unit_activity(au: NDArray, au_names: Sequence[str], units: Sequence[str]) ->
     au = np.asarray(au, dtype=np.float64)
     curves = au[:, [names.index(u) for u in units]]
     low, span = curves.min(axis=0), np.ptp(curves, axis=0)
-    scaled = np.where(span > 1e-9, (curves - low) / np.where(span > 1e-9, span, 1.0), 0.0)
+    scaled = np.where(span > 1e-9, (curves - low) / np.maximum(span, full_span), 0.0)
     return scaled.max(axis=1, initial=0.0) ** 4
 
 

@@ -138,6 +138,15 @@ class DriveParams(BaseModel):
         "peaks and fades to none where they rest, so a smile gesture leaves the jaw drop "
         "alone (empty: the factors apply in every frame)",
     )
+    actuation_scale_full_span: float = Field(
+        0.4,
+        gt=0.0,
+        le=2.0,
+        description="actuation_scale_with: a unit's activity is measured from its least to its "
+        "largest value over the run, or over this many action units where it varies less (a "
+        "lip corner puller's 1 moves the mouth corner 7 mm), so on a performance without the "
+        "expression the fit's leak of the unit is not taken for its peak; action units",
+    )
     landmarks: list[str] | None = Field(
         None, description="driving landmarks (default: every tracked landmark but 'exclude')"
     )
