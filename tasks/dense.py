@@ -82,7 +82,7 @@ def compute(
         unfolded_vertex_frames=dense.unfolded,
     )
     parts = []
-    if dense.neutral is not None and params.rest_factor > 0:
+    if params.rest_factor > 0:
         parts.append(_neutral_summary(dense.neutral))
     if dense.registration is not None:
         parts.append(_registration_summary(dense.registration, track.head_pose[0]))

@@ -122,9 +122,9 @@ class DenseMotion:
     ``head_pose`` (T, 4, 4) camera <- actor, m; ``seen`` (N,) bool, seen in the neutral
     frame; ``flow_error_px`` (T,) median forward-backward flow disagreement of the seen
     vertices; ``seconds_per_frame`` wall time of the flow, lifting and filling per frame;
+    ``neutral`` the neutral frame's error taken out (:func:`without_neutral_error`);
     ``registration`` of the scan to the neutral depth (None when not asked for);
-    ``unfolded`` how many (frame, vertex) pairs :func:`unfold_unseen` filled anew;
-    ``neutral`` the neutral frame's error taken out (:func:`without_neutral_error`).
+    ``unfolded`` how many (frame, vertex) pairs :func:`unfold_unseen` filled anew.
     """
 
     displacement: NDArray
@@ -133,9 +133,9 @@ class DenseMotion:
     seen: NDArray
     flow_error_px: NDArray
     seconds_per_frame: float
+    neutral: NeutralError
     registration: Registration | None = None
     unfolded: int = 0
-    neutral: NeutralError | None = None
 
 
 def smooth_depth(depth: NDArray, sigma_px: float) -> NDArray:
@@ -665,5 +665,5 @@ def dense_track(
     seconds = obs.seconds + time.perf_counter() - start
     return DenseMotion(
         displacement, confidence, obs.head_pose, obs.seen, flow_error, seconds / color.shape[0],
-        obs.registration, unfolded, neutral,
+        neutral, obs.registration, unfolded,
     )  # fmt: skip
