@@ -124,9 +124,9 @@ def measure(dataset_arg: str, splits: int, overrides: list[str]) -> list[list]:
             axis=1,
         )  # the left-out landmarks' rows weigh nothing: only their fitted motion is read
         t0 = time.perf_counter()
-        fit, *_ = inverse_step(
+        fit = inverse_step(
             params, tetra, conditions, observed, targets, weights, align.landmark_positions()
-        )
+        ).fit
         seconds = time.perf_counter() - t0
         fem = relative_and_rms(fit.fitted[:, len(springs.nodes) :], motion[:, li])
         ki = [names.index(n) for n in kept]

@@ -35,6 +35,7 @@ if TYPE_CHECKING:
     from physanim.fem.actuation import Actuation, StressBasis
     from physanim.fem.boundary import BoundaryConditions
     from physanim.fem.inverse import ActuationFit
+    from physanim.fem.model import FemModel
 
 
 class DriveMode(BaseModel):
@@ -167,6 +168,55 @@ def with_landmarks(
     )
 
 
+@dataclass(frozen=True)
+class FitInputs:
+    """What the inverse step fits: the ``conditions`` (skull held, mandible turned), the
+    ``observed`` (S,) nodes (the captured scan's skin nodes first, ``n_captured`` of them,
+    then any landmark patches' nodes), their ``targets`` (T, S, 3) m and ``weights`` (T, S)."""
+
+    conditions: BoundaryConditions
+    observed: np.ndarray
+    targets: np.ndarray
+    weights: np.ndarray
+    n_captured: int
+
+
+def fit_inputs(
+    params: ActuateParams,
+    track: TrackOutput,
+    align: AlignOutput,
+    dense: DenseOutput,
+    tetra: TetraOutput,
+) -> FitInputs:
+    """The inverse step's conditions, observed nodes, targets and weights: each skin node
+    bound to the captured scan towards its motion, weighted by its skin area and the
+    capture's confidence there (``filled_weight`` where the capture filled it in)."""
+    from physanim.face.drive import skin_areas
+    from physanim.face.performance import SkinBinding
+    from physanim.fem.boundary import BoundaryConditions
+
+    nodes = tetra.nodes
+    drive = stage_drive(track, align, tetra, DriveParams(mode="actuation"), params.jaw)
+    conditions = BoundaryConditions.checked(
+        len(nodes), drive.prescribed, drive.prescribed_traj, 1.0 / float(track.fps)
+    )
+    tissue = {k: getattr(tetra, k) for k in ("nodes", "skin", "bone", "side")}
+    binding = SkinBinding.of(tissue, align.mouth(), (align.scan_vertices, align.scan_faces))
+    motion, confidence = captured_motion(dense)
+    targets = binding.displacements(motion)
+    fill = params.actuation.filled_weight
+    trust = fill + (1.0 - fill) * binding.values(confidence)
+    areas = skin_areas(nodes, tetra.tets, tetra.skin)
+    weights = areas[binding.nodes] * trust
+    observed = binding.nodes
+    if params.actuation.landmark_weight > 0:  # the landmark drive (a second jaw estimate)
+        observed, targets, weights = with_landmarks(
+            params, stage_drive(track, align, tetra, params.drive.patches(), params.jaw),
+            observed, targets, weights, areas,
+        )  # fmt: skip
+    return FitInputs(conditions, observed, targets, weights, len(binding.nodes))
+
+
 def compute(
     params: ActuateParams,
     track: TrackOutput,
@@ -178,57 +228,36 @@ def compute(
     """Coefficients (T, P, 5) Pa, patch centres (P, 3) m and regions, the fit's relative
     residual per frame (T,) and face region (T, R)."""
     from physanim.evaluate.fidelity import REGIONS, face_regions, motion_fidelity
-    from physanim.face.drive import skin_areas
-    from physanim.face.performance import SkinBinding
-    from physanim.fem.boundary import BoundaryConditions
 
     if params.drive.mode != "actuation":
         return _not_needed(len(track.points), params.drive.mode)
     report = ctx.progress("actuate")
     report(0, 2)
     t_start = t0 = time.perf_counter()
-    nodes, tets = tetra.nodes, tetra.tets
-    drive = stage_drive(track, align, tetra, DriveParams(mode="actuation"), params.jaw)
-    conditions = BoundaryConditions.checked(
-        len(nodes), drive.prescribed, drive.prescribed_traj, 1.0 / float(track.fps)
-    )
-    tissue = {k: getattr(tetra, k) for k in ("nodes", "skin", "bone", "side")}
-    binding = SkinBinding.of(tissue, align.mouth(), (align.scan_vertices, align.scan_faces))
-    motion, confidence = captured_motion(dense)
-    targets = binding.displacements(motion)
-    fill = params.actuation.filled_weight
-    trust = fill + (1.0 - fill) * binding.values(confidence)
-    areas = skin_areas(nodes, tets, tetra.skin)
-    weights = areas[binding.nodes] * trust
-    observed = binding.nodes
-    if params.actuation.landmark_weight > 0:  # the landmark drive (a second jaw estimate)
-        observed, targets, weights = with_landmarks(
-            params, stage_drive(track, align, tetra, params.drive.patches(), params.jaw),
-            observed, targets, weights, areas,
-        )  # fmt: skip
+    inputs = fit_inputs(params, track, align, dense, tetra)
+    observed, targets, weights = inputs.observed, inputs.targets, inputs.weights
     t_drive = time.perf_counter() - t0
     report(1, 2)
     landmarks = align.landmark_positions()
-    fit, basis, patch_region, t_model = inverse_step(
-        params, tetra, conditions, observed, targets, weights, landmarks
-    )
+    step = inverse_step(params, tetra, inputs.conditions, observed, targets, weights, landmarks)
+    fit, basis = step.fit, step.basis
     report(2, 2)
 
-    labels = face_regions(nodes[binding.nodes], landmarks)
-    n = len(binding.nodes)  # the residual on the captured scan's rows (no landmark rows)
+    n = inputs.n_captured  # the residual on the captured scan's rows (no landmark rows)
+    labels = face_regions(tetra.nodes[observed[:n]], landmarks)
     captured, fitted = targets[:, :n], fit.fitted[:, :n]
     residual = motion_fidelity(fitted, captured, labels)
     passive = motion_fidelity(fit.passive[:, :n], captured, labels).overall
-    seconds = {"drive": t_drive, "model": t_model, **fit.seconds}
+    seconds = {"drive": t_drive, "model": step.model_seconds, **fit.seconds}
     seconds["total"] = time.perf_counter() - t_start
     summary = _summary(fitted, captured, weights[:, :n], residual, passive, seconds, fit)
-    summary.update(patches=basis.n_patches, skin_nodes=len(binding.nodes))
+    summary.update(patches=basis.n_patches, skin_nodes=n)
     return ActuateOutput(
         coefficients=fit.coefficients,
         centres=basis.centres,
         centre_lift=basis.lift,
-        patch_region=patch_region,
-        skin_nodes=binding.nodes,
+        patch_region=step.patch_region,
+        skin_nodes=observed[:n],
         residual=residual.overall,
         residual_regions=residual.regions,
         passive=passive,
@@ -239,6 +268,21 @@ def compute(
     )
 
 
+@dataclass(frozen=True)
+class InverseStep:
+    """The inverse step's answer: the ``fit``; the ``model`` (the basis material) and stress
+    ``basis`` it was fitted with; each patch's face region index ``patch_region`` (P,) (-1:
+    none) and stress cost factor ``patch_cost`` (P,); the seconds spent building the model
+    and the basis."""
+
+    fit: ActuationFit
+    model: FemModel
+    basis: StressBasis
+    patch_region: np.ndarray
+    patch_cost: np.ndarray
+    model_seconds: float
+
+
 def inverse_step(
     params: ActuateParams,
     tetra: TetraOutput,
@@ -247,13 +291,11 @@ def inverse_step(
     targets: np.ndarray,
     weights: np.ndarray,
     landmarks: dict[str, np.ndarray],
-) -> tuple[ActuationFit, StressBasis, np.ndarray, float]:
+) -> InverseStep:
     """The fitted actuation (``physanim.fem.inverse.fit_actuation``) of the tetra mesh at the
     basis material under ``conditions``, moving the ``observed`` (S,) skin nodes to
     ``targets`` (T, S, 3) m with ``weights`` (T, S), each patch at the stress cost of its
-    face region (from the feature points ``landmarks``, m) and depth under the skin; its
-    stress basis, the region index (P,) of each patch (-1: none) and the seconds spent
-    building the model and the basis."""
+    face region (from the feature points ``landmarks``, m) and depth under the skin."""
     from scipy.spatial import cKDTree
 
     from physanim.evaluate.fidelity import face_regions, region_names
@@ -278,14 +320,14 @@ def inverse_step(
     basis = StressBasis.covering(tetra.nodes, tetra.tets, fit_params.patch_spacing_m, lift, muscle)
     patch_region = face_regions(basis.centres, landmarks)
     depth = skin.query(basis.centres)[0]
-    cost = fit_params.patch_cost(region_names(patch_region), depth)
+    cost = np.asarray(fit_params.patch_cost(region_names(patch_region), depth))
     t_model = time.perf_counter() - t0
     fit = fit_actuation(
         model, basis, conditions, observed, targets, weights,
         fit_params.stress_cost_mm_per_kPa * 1e-6, fit_params.rate_cost_mm_per_kPa * 1e-6,
-        params.solver, fit_params.robust_mm * 1e-3, np.asarray(cost),
+        params.solver, fit_params.robust_mm * 1e-3, cost,
     )  # fmt: skip
-    return fit, basis, patch_region, t_model
+    return InverseStep(fit, model, basis, patch_region, cost, t_model)
 
 
 def lip_lift(params: ActuateParams) -> float:
