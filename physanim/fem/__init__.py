@@ -10,6 +10,8 @@ per-tet sigma_a added to the law's stress, its nodal forces -sum_e V_e B_e^T sig
 interpolated between frames like the driven motion), ``kinematics`` (linear / corotational),
 ``stepping`` (adaptive Newmark between frames) and ``monitors`` (energy, stress, inversion per
 frame). ``inverse``: the actuation with which the static FEM reproduces observed motion.
+``hyperelastic``: a large-strain law (isochoric neo-Hookean, averaged nodal pressure on ln J,
+active stress in the material frame) and its static Newton solve.
 
 Element formulations (``SimulateParams.formulation``), thick-walled cylinder under internal
 pressure (plane strain, quarter section, b/a = 2), computed / Lame inner displacement:

@@ -54,6 +54,8 @@ DEVIATORIC = np.array(
         [0, 0, 0, 0, 0, 1 / _S2],
     ]
 )
+#: Voigt index (xx, yy, zz, yz, xz, xy) of each tensor component (i, j)
+VOIGT_INDEX = np.array([[0, 5, 4], [5, 1, 3], [4, 3, 2]])
 #: a patch reaches this many times the centres' spacing (every tet lies in several patches)
 RADIUS_PER_SPACING = 2.0
 #: a tet that may hold no centre lies within this many spacings of one: well inside a
@@ -208,15 +210,23 @@ class StressBasis:
         """Per-tet active stress (M, 6) Pa of coefficients (P, 5) Pa."""
         return self.weights @ (np.asarray(coefficients) @ DEVIATORIC)
 
-    def force_matrix(self, model: FemModel) -> sp.csc_matrix:
+    def force_matrix(self, model: FemModel, deformation: NDArray | None = None) -> sp.csc_matrix:
         """(3N, 5P) active nodal forces of ``model``'s mesh, N per Pa of each coefficient
         (patch-major): column (p, k) is -sum_e w_ep V_e B_e^T DEVIATORIC[k], what
-        ``model_force_operator(model)`` makes of that stress field."""
+        ``model_force_operator(model)`` makes of that stress field; with the tets'
+        ``deformation`` gradients F (M, 3, 3), the large-strain forces of that stress held
+        in the material frame (:mod:`physanim.fem.hyperelastic`): node a of tet e gets
+        -w_ep V_e F_e S_k grad N_a, S_k the tensor of DEVIATORIC[k]."""
         # per direction k, each tet's 12 nodal forces summed over the patches' tets: a sixth
         # of the products through the (3N, 6M) stress operator and no Kronecker product (a
         # 2 mm demo mesh, 150k tets: 1.2 s against 2.5 s)
-        b = strain_displacement(model.grads) * model.volumes[:, None, None]  # (M, 6, 12)
-        per_tet = -np.einsum("mij,ki->kmj", b, DEVIATORIC)  # (5, M, 12)
+        if deformation is None:
+            b = strain_displacement(model.grads) * model.volumes[:, None, None]  # (M, 6, 12)
+            per_tet = -np.einsum("mij,ki->kmj", b, DEVIATORIC)  # (5, M, 12)
+        else:
+            FS = np.einsum("mij,kjl->kmil", deformation, DEVIATORIC[:, VOIGT_INDEX])  # (5, M, 3, 3)
+            per_tet = -np.einsum("m,kmil,mal->kmai", model.volumes, FS, model.grads)
+            per_tet = per_tet.reshape(len(DEVIATORIC), len(model.tets), 12)
         m, n_dirs, p = len(model.tets), len(DEVIATORIC), self.n_patches
         dofs, indptr = element_dofs(model.tets).ravel(), 12 * np.arange(m + 1)
         to_patches = self.weights.T.tocsr()  # (P, M)

@@ -1,0 +1,212 @@
+"""Large-strain elasticity of the tet FEM: isochoric neo-Hookean shear with the averaged
+nodal pressure on ln J, and its static solve under dead loads (the actuation's forces).
+
+Why: the linear law keeps the trace of its small strain near zero where nearly
+incompressible tissue stretches, so a lip edge stretched s times thins to 2 - s of its
+thickness and turns inside out beyond s = 2 (docs/VALIDATION.md, issue #32). This law keeps
+the volume of every tet: its energy grows without bound as a tet's volume goes to zero.
+
+Energy (J) of displacements d (3N,) m, F_e = I + sum_a u_a grad N_a^T per tet, J_e = det F_e:
+
+    E(d) = sum_e V_e mu_e / 2 (J_e^(-2/3) tr(F_e^T F_e) - 3) + 1/2 sum_n w_n theta_n^2,
+    theta = S ln J   (the nodal average of each tet's ln J_e),
+
+with the model's shear modulus mu (M,) Pa, nodal averaging S (N, M) and w = kappa_n V_n (N,)
+N m of the 'anp' element (:mod:`physanim.fem.elements`). For small strain it is the linear
+'anp' model's energy (ln J -> tr eps, the isochoric term -> mu |dev eps|^2): the same
+stiffness at rest. Dead loads f (N) enter as -f . d.
+
+Active stress (:mod:`physanim.fem.actuation`'s sigma_a per tet) is a second Piola-Kirchhoff
+stress S_a held in each tet's material frame, with energy
+
+    E_a(d) = sum_e V_e / 2 S_a,e : (F_e^T F_e - I),   nominal stress F_e S_a,e,
+
+so it turns with the tissue (a rotated tet feels no torque from it, where a stress held in
+the rest configuration would twist it), and for small strain it is the linear model's active
+stress: E_a -> sum_e V_e S_a,e : eps_e, the nodal forces -sum_e V_e B_e^T S_a,e.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from physanim.fem.actuation import VOIGT_INDEX
+from physanim.fem.linsolve import factorize
+from physanim.fem.model import FemModel
+from physanim.fem.statics import free_dofs
+
+#: Armijo constant and smallest step of the Newton line search
+ARMIJO, MIN_STEP = 1e-4, 1e-8
+
+
+def tensors(voigt: NDArray) -> NDArray:
+    """Symmetric tensors (M, 3, 3) of Voigt 6-vectors (M, 6) (tensor components, not doubled
+    shears)."""
+    return np.asarray(voigt, dtype=np.float64)[:, VOIGT_INDEX]
+
+
+def _strain_map(grads: NDArray) -> NDArray:
+    """(M, 9, 12): row-major F_ij per node DOF (a, k), dF_ij / du_ak = delta_ik grad_a,j."""
+    m = len(grads)
+    out = np.zeros((m, 3, 3, 4, 3))
+    for i in range(3):
+        out[:, i, :, :, i] = grads.transpose(0, 2, 1)
+    return out.reshape(m, 9, 12)
+
+
+@dataclass(frozen=True)
+class NeoHookeanANP:
+    """The module's energy on an assembled 'anp' :class:`FemModel` (its mu, S, w_vol)."""
+
+    model: FemModel
+
+    def __post_init__(self) -> None:
+        if self.model.G is None:
+            raise ValueError("the large-strain law needs the 'anp' element formulation")
+
+    def deformation(self, d: NDArray) -> tuple[NDArray, NDArray]:
+        """Deformation gradients F (M, 3, 3) and their determinants J (M,) of d (3N,) m."""
+        m = self.model
+        u = np.asarray(d, dtype=np.float64)[m.dofs].reshape(-1, 4, 3)
+        F = np.eye(3) + np.einsum("mai,maj->mij", u, m.grads)
+        return F, np.linalg.det(F)
+
+    def energy(self, d: NDArray, f: NDArray | None = None, active: NDArray | None = None) -> float:
+        """E(d) + E_a(d) - f . d in J for the active stress ``active`` (M, 6) Pa (Voigt);
+        inf where any tet is inverted or flat (J <= 0)."""
+        F, J = self.deformation(d)
+        if np.any(J <= 0):
+            return float("inf")
+        m = self.model
+        shear = m.volumes * m.mu / 2 * (J ** (-2 / 3) * np.einsum("mij,mij->m", F, F) - 3)
+        theta = m.S @ np.log(J)
+        total = float(shear.sum() + 0.5 * m.w_vol @ theta**2)
+        if active is not None:
+            green = np.einsum("mki,mkj->mij", F, F) - np.eye(3)
+            total += 0.5 * float(m.volumes @ np.einsum("mij,mij->m", tensors(active), green))
+        return total - (0.0 if f is None else float(np.asarray(f) @ d))
+
+    def gradient(
+        self,
+        d: NDArray,
+        f: NDArray | None = None,
+        active: NDArray | None = None,
+        hessian: bool = False,
+    ) -> tuple[NDArray, sp.csr_matrix | None]:
+        """d(E + E_a)/dd - f (3N,) N (``active`` (M, 6) Pa, Voigt) and, with ``hessian``, the
+        exact Hessian (3N, 3N) N/m (the tangent stiffness; valid where every J > 0)."""
+        m = self.model
+        F, J = self.deformation(d)
+        FiT = np.linalg.inv(F).transpose(0, 2, 1)
+        i1 = np.einsum("mij,mij->m", F, F)
+        a = J ** (-2 / 3)
+        pressure = m.S.T @ (m.w_vol * (m.S @ np.log(J)))  # (M,) N m, dE/d(ln J_e)
+        scale = (m.volumes * m.mu * a)[:, None, None]
+        P = scale * (F - (i1 / 3)[:, None, None] * FiT) + pressure[:, None, None] * FiT
+        S_a = None if active is None else tensors(active)
+        if S_a is not None:
+            P = P + m.volumes[:, None, None] * (F @ S_a)
+        dFdu = _strain_map(m.grads)
+        fe = np.einsum("mk,mkl->ml", P.reshape(-1, 9), dFdu)
+        g = np.bincount(m.dofs.ravel(), fe.ravel(), minlength=m.n_dofs)
+        if f is not None:
+            g = g - f
+        if not hessian:
+            return g, None
+        # d(F^-T)/dF [ij, kl] = -F^-T_il F^-T_kj; the isochoric tangent (J^-2/3 mu V times)
+        inv_t = np.einsum("mil,mkj->mijkl", FiT, FiT)
+        outer = lambda A, B: np.einsum("mij,mkl->mijkl", A, B)  # noqa: E731
+        eye = np.einsum("ik,jl->ijkl", np.eye(3), np.eye(3))[None]
+        c = i1[:, None, None, None, None]
+        shear = (
+            eye - (2 / 3) * (outer(F, FiT) + outer(FiT, F))
+            + (2 / 9) * c * outer(FiT, FiT) + (1 / 3) * c * inv_t
+        )  # fmt: skip
+        D = scale[..., None, None] * shear - pressure[:, None, None, None, None] * inv_t
+        if S_a is not None:  # d(F S_a)_ij / dF_kl = delta_ik S_a,lj
+            D = D + np.einsum("ik,mlj->mijkl", np.eye(3), m.volumes[:, None, None] * S_a)
+        blocks = np.einsum("mak,mab,mbl->mkl", dFdu, D.reshape(-1, 9, 9), dFdu)
+        rows = np.repeat(m.dofs, 12, axis=1).ravel()
+        cols = np.tile(m.dofs, (1, 12)).ravel()
+        H = sp.csr_matrix((blocks.ravel(), (rows, cols)), shape=(m.n_dofs, m.n_dofs))
+        # the volumetric part's Gauss-Newton term: Gn^T diag(w) Gn, Gn = S d(ln J)/dd
+        rows_ln = np.einsum("mij,maj->mai", FiT, m.grads).reshape(-1, 12)
+        dln = sp.csr_matrix(
+            (rows_ln.ravel(), m.dofs.ravel(), np.arange(0, rows_ln.size + 1, 12)),
+            shape=(len(m.tets), m.n_dofs),
+        )
+        Gn = (m.S @ dln).tocsr()
+        return g, (H + Gn.T @ sp.diags(m.w_vol) @ Gn).tocsr()
+
+
+class NotConverged(RuntimeError):
+    """The large-strain static solve did not reach its tolerance."""
+
+
+def solve_static_large_strain(
+    law: NeoHookeanANP,
+    prescribed: NDArray,
+    values: NDArray,
+    f: NDArray | None = None,
+    active: NDArray | None = None,
+    start: NDArray | None = None,
+    rtol: float = 1e-6,
+    atol: float = 1e-9,
+    max_iter: int = 30,
+    solver: str = "superlu",
+) -> tuple[NDArray, int]:
+    """The equilibrium d (3N,) m of ``law`` under dead loads ``f`` (3N,) N and the active
+    stress ``active`` (M, 6) Pa (Voigt) with d[prescribed] = ``values`` (m), by Newton's
+    method with a backtracking line search on the energy from ``start`` (default: the rest;
+    the prescribed values are taken first along the tangent, the step halved until no tet
+    inverts); and the Newton iterations taken.
+
+    Converged when |gradient| on the free DOFs <= rtol |f| + atol (N). NotConverged when it
+    is not within ``max_iter`` iterations (load in smaller steps: the solve does not). The
+    tangent may be indefinite far from equilibrium: ``solver`` must factorise an indefinite
+    matrix (SuperLU's LU does)."""
+    m = law.model
+    n = m.n_dofs
+    pres = np.asarray(prescribed, dtype=np.int64)
+    free = free_dofs(n, pres)
+    force = np.zeros(n) if f is None else np.asarray(f, dtype=np.float64)
+    d = np.zeros(n) if start is None else np.array(start, dtype=np.float64)
+    jump = np.asarray(values, dtype=np.float64) - d[pres]
+    if np.any(jump):  # take the prescribed values along the tangent at the start
+        _, H = law.gradient(d, force, active, hessian=True)
+        move = np.zeros(n)
+        move[pres] = jump
+        move[free] = -factorize(H[free][:, free].tocsc(), solver)(H[free][:, pres] @ jump)
+        t = 1.0
+        while np.any(law.deformation(d + t * move)[1] <= 0) and t > MIN_STEP:
+            t /= 2
+        d = d + t * move
+        d[pres] = values
+        if np.any(law.deformation(d)[1] <= 0):
+            raise NotConverged("the prescribed values invert tets: prescribe them in steps")
+    tol = rtol * float(np.linalg.norm(force[free])) + atol
+    for it in range(max_iter):
+        g, H = law.gradient(d, force, active, hessian=True)
+        g_u = g[free]
+        if np.linalg.norm(g_u) <= tol:
+            return d, it
+        step = np.zeros(n)
+        step[free] = -factorize(H[free][:, free].tocsc(), solver)(g_u)
+        slope = float(g_u @ step[free])
+        if not slope < 0:  # an indefinite tangent: fall back on steepest descent
+            step[free], slope = -g_u, -float(g_u @ g_u)
+        e0, t = law.energy(d, force, active), 1.0
+        while law.energy(d + t * step, force, active) > e0 + ARMIJO * t * slope and t > MIN_STEP:
+            t /= 2
+        d = d + t * step
+    g, _ = law.gradient(d, force, active)
+    if np.linalg.norm(g[free]) <= tol:
+        return d, max_iter
+    raise NotConverged(
+        f"large-strain static solve: |gradient| {np.linalg.norm(g[free]):.3g} N after "
+        f"{max_iter} Newton iterations (tolerance {tol:.3g} N); load in smaller steps"
+    )
