@@ -165,9 +165,9 @@ def solve_static_large_strain(
     the prescribed values are taken first along the tangent, the step halved until no tet
     inverts); and the Newton iterations taken.
 
-    Converged when |gradient| on the free DOFs <= rtol |f| + atol (N). NotConverged when it
-    is not within ``max_iter`` iterations (load in smaller steps: the solve does not). The
-    tangent may be indefinite far from equilibrium: ``solver`` must factorise an indefinite
+    Converged when |gradient| on the free DOFs <= rtol |f - f_a| + atol (N), f_a the active
+    stress's forces at the start. NotConverged when it is not within ``max_iter`` iterations
+    (load in smaller steps: the solve does not). The tangent may be indefinite far from equilibrium: ``solver`` must factorise an indefinite
     matrix (SuperLU's LU does)."""
     m = law.model
     n = m.n_dofs
@@ -188,7 +188,11 @@ def solve_static_large_strain(
         d[pres] = values
         if np.any(law.deformation(d)[1] <= 0):
             raise NotConverged("the prescribed values invert tets: prescribe them in steps")
-    tol = rtol * float(np.linalg.norm(force[free])) + atol
+    # the scale of the loads: the dead loads and the active stress's forces at the start
+    active_force = (
+        law.gradient(d, None, active)[0] - law.gradient(d)[0] if active is not None else 0
+    )
+    tol = rtol * float(np.linalg.norm((force - active_force)[free])) + atol
     for it in range(max_iter):
         g, H = law.gradient(d, force, active, hessian=True)
         g_u = g[free]
