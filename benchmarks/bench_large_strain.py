@@ -1,0 +1,271 @@
+"""The inverse step at one frame under the linear law and under the large-strain law.
+
+Issue #32's jaw drops: the linear law turns lip tets inside out to follow the captured lip's
+stretch (docs/VALIDATION.md). This fits one frame's actuation (stage ``actuate``'s inputs:
+the captured scan's skin nodes, targets and weights, the skull held and the mandible turned;
+its stress basis and per-patch stress costs; no rate cost and no Huber reweighting, which
+couple or reweight frames) twice:
+
+- linear: the static linear FEM at the basis material, one least-squares solve;
+- large strain: :mod:`physanim.fem.hyperelastic` (isochoric neo-Hookean, averaged nodal
+  pressure on ln J, the active stress in the material frame), by Levenberg-Marquardt on the
+  coefficients, each trial solved to equilibrium by Newton's method, with the targets taken
+  from the passive equilibrium (the conditions alone) to the capture in continuation steps
+  (halved where a step fails).
+
+Between them: the large-strain law under the linear fit's actuation (loaded in steps, each
+halved where Newton's method fails; ``targets_reached`` is the share of the load reached).
+For each: the fit's residual (relative displacement error of the skin against the captured
+scan, moving skin only, as stage ``actuate`` reports it), tets inside out, the smallest
+volume ratio J, the RMS active stress (kPa) and the seconds. The frame is the one whose
+stored fit (stage ``actuate``) turns the most tets inside out, unless given. A large-strain
+fit takes minutes (each trial a few Newton steps on the whole mesh): the benchmark measures
+whether that law can follow the capture, not a product cost.
+
+Run: .venv/bin/python benchmarks/bench_large_strain.py [--dataset demo] [--frame F]
+[--set key=value]...
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from results import Table, describe, record  # benchmarks/results.py, beside this script
+
+from flows.dags import FACE
+from physanim.config import load_config
+from physanim.evaluate.fidelity import face_regions, motion_fidelity
+from physanim.fem.actuation import DEVIATORIC
+from physanim.fem.geometry import node_dofs
+from physanim.fem.hyperelastic import NeoHookeanANP, NotConverged, solve_static_large_strain
+from physanim.fem.linsolve import factorize
+from physanim.fem.statics import free_dofs
+from physanim.pipeline import stage_inputs
+from physanim.pipeline.progress import rich_progress
+from physanim.pipeline.spec import dataset_overrides
+from tasks.actuation import ActuateParams, fit_inputs, inverse_step
+
+#: continuation: first step of the targets' share, smallest step before giving up
+FIRST_STEP, SMALLEST_STEP = 0.2, 0.0125
+#: Levenberg-Marquardt iterations per continuation step (more at the last), Newton's per trial
+LM_ITERATIONS, LM_LAST, NEWTON_ITERATIONS = 3, 8, 10
+#: relative gain of the objective below which a continuation step's iterations stop
+LM_GAIN = 1e-3
+
+
+class FrameFit:
+    """One frame's objective: the weighted mean square misfit of the ``observed`` nodes'
+    DOFs ``rows`` (3S,) to ``targets`` (3S,) m plus lambda sum_i u_i a_i^2 (the inverse
+    step's stress penalty without its rate term)."""
+
+    def __init__(self, rows, targets, weights, penalty, lam):
+        self.rows, self.y = rows, targets
+        self.w = np.repeat(weights / weights.sum(), 3)
+        self.u, self.lam = penalty, lam
+
+    def value(self, d: np.ndarray, a: np.ndarray) -> float:
+        r = d[self.rows] - self.y
+        return float(self.w @ r**2 + self.lam * self.u @ a**2)
+
+    def step(self, d, a, sensitivity, damping) -> np.ndarray:
+        """The Levenberg-Marquardt step of the coefficients for d(a) ~ d + sensitivity da."""
+        r = d[self.rows] - self.y
+        A = (sensitivity * self.w[:, None]).T @ sensitivity
+        A[np.diag_indices_from(A)] += (self.lam + damping) * self.u
+        return -np.linalg.solve(A, sensitivity.T @ (self.w * r) + self.lam * self.u * a)
+
+
+def linear_fit(model, basis, pres, values, fit: FrameFit):
+    """The linear law's minimiser: coefficients (5P,) Pa and displacements (3N,) m."""
+    free = free_dofs(model.n_dofs, pres)
+    solve = factorize(model.K[free][:, free].tocsc())
+    forces = basis.force_matrix(model)[free]
+    at = np.searchsorted(free, fit.rows)
+    R = solve(forces.toarray())
+    d = np.zeros(model.n_dofs)
+    d[pres] = values
+    d[free] = solve(-(model.K[free][:, pres] @ values))
+    a = fit.step(d, np.zeros(forces.shape[1]), R[at], 0.0)
+    d[free] += R @ a
+    return a, d
+
+
+def large_strain_fit(law, basis, pres, values, fit: FrameFit, log):
+    """The large-strain law's fit by continuation (module docstring): coefficients, the
+    equilibrium, the share of the targets reached and the Newton iterations taken."""
+    model = law.model
+    free = free_dofs(model.n_dofs, pres)
+    at = np.searchsorted(free, fit.rows)
+    d, newton = np.zeros(model.n_dofs), 0
+    for share in np.linspace(0.25, 1.0, 4):  # the conditions alone, in steps
+        d, its = solve_static_large_strain(law, pres, share * values, start=d)
+        newton += its
+    a = np.zeros(basis.size)
+    full, passive = fit.y.copy(), d[fit.rows].copy()
+    reached, step, damping = 0.0, FIRST_STEP, 1e-3 * fit.lam
+    while reached < 1.0 and step >= SMALLEST_STEP:
+        share = min(1.0, reached + step)
+        fit.y = passive + share * (full - passive)
+        saved, current, failed, accepted = (a, d), fit.value(d, a), False, 0
+        for _ in range(LM_LAST if share == 1.0 else LM_ITERATIONS):
+            stress = basis.stress(a.reshape(-1, len(DEVIATORIC)))
+            F, _ = law.deformation(d)
+            _, H = law.gradient(d, active=stress, hessian=True)
+            solve = factorize(H[free][:, free].tocsc(), "superlu")
+            forces = basis.force_matrix(model, F)[free]
+            sens = solve(forces.toarray())
+            while True:
+                da = fit.step(d, a, sens[at], damping)
+                trial = d.copy()
+                trial[free] += sens @ da
+                try:
+                    stress = basis.stress((a + da).reshape(-1, len(DEVIATORIC)))
+                    moved, its = solve_static_large_strain(
+                        law, pres, values, active=stress, start=_right_side_out(law, d, trial),
+                        max_iter=NEWTON_ITERATIONS,
+                    )  # fmt: skip
+                    newton += its
+                    value = fit.value(moved, a + da)
+                except NotConverged:
+                    value = np.inf
+                if value < current:
+                    gain = (current - value) / current
+                    a, d, current = a + da, moved, value
+                    damping = max(damping / 3, 1e-6 * fit.lam)
+                    accepted += 1
+                    break
+                damping *= 4
+                if damping > 1e4 * fit.lam:
+                    failed = True
+                    break
+            if failed or gain < LM_GAIN:
+                break
+        if failed and not accepted:
+            a, d = saved
+            step /= 2
+            damping = 1e-3 * fit.lam
+            log(f"  share {share:.3f}: no step; continuation step halved to {step:.4f}")
+            continue
+        reached = share
+        log(
+            f"  share {share:.3f}: objective {current:.3e}, min J {law.deformation(d)[1].min():.3f}"
+        )
+    fit.y = full
+    return a, d, reached, newton
+
+
+def held(law, basis, pres, values, a, steps=8):
+    """The large-strain equilibrium (3N,) m under the coefficients ``a`` (5P,) Pa, loaded in
+    ``steps`` (halved where a step fails); the share of the load reached, Newton iterations."""
+    d, reached, newton, step = np.zeros(law.model.n_dofs), 0.0, 0, 1.0 / steps
+    while reached < 1.0 and step >= SMALLEST_STEP / 8:
+        share = min(1.0, reached + step)
+        stress = basis.stress(share * a.reshape(-1, len(DEVIATORIC)))
+        try:
+            d, its = solve_static_large_strain(
+                law, pres, share * values, active=stress, start=d, max_iter=2 * NEWTON_ITERATIONS
+            )
+        except NotConverged:
+            step /= 2
+            continue
+        reached, newton = share, newton + its
+    return d, reached, newton
+
+
+def _right_side_out(law, d, trial):
+    """``trial``, or the way from ``d`` towards it halved until no tet is inside out."""
+    t = 1.0
+    while np.any(law.deformation(d + t * (trial - d))[1] <= 0) and t > 1e-6:
+        t /= 2
+    return d + t * (trial - d)
+
+
+def measure(dataset_arg: str, frame: int | None, overrides: list[str]) -> list[list]:
+    """Rows (law, residual, inverted, min J, RMS stress, seconds) of one dataset's frame."""
+    config, _ = load_config(
+        FACE.config_model(), [FACE.default_config], [*dataset_overrides(dataset_arg), *overrides]
+    )
+    with rich_progress() as progress:
+        inputs = stage_inputs(FACE, config, "actuate", progress)
+    params: ActuateParams = FACE.stage("actuate").params_from(config)
+    track, align, dense, tetra = (inputs[k] for k in ("track", "align", "dense", "tetra"))
+    fin = fit_inputs(params, track, align, dense, tetra)
+    landmarks = align.landmark_positions()
+    step = inverse_step(
+        params, tetra, fin.conditions, fin.observed, fin.targets, fin.weights, landmarks
+    )
+    model, basis, n = step.model, step.basis, fin.n_captured
+    law = NeoHookeanANP(model)
+    pres = fin.conditions.prescribed_dofs
+    values = fin.conditions.prescribed(fin.conditions.frame_dt * np.arange(len(fin.targets)))[0]
+    if frame is None:  # the stored fit's frame with the most tets inside out
+        free = free_dofs(model.n_dofs, pres)
+        solve = factorize(model.K[free][:, free].tocsc())
+        rhs = (basis.force_matrix(model)[free] @ step.fit.coefficients.reshape(len(values), -1).T
+               - model.K[free][:, pres] @ values.T)  # fmt: skip
+        d_all = np.zeros((model.n_dofs, len(values)))
+        d_all[pres], d_all[free] = values.T, solve(rhs)
+        inverted = [int((law.deformation(d_all[:, t])[1] <= 0).sum()) for t in range(len(values))]
+        frame = int(np.argmax(inverted))
+        print(f"{dataset_arg}: frame {frame}, {inverted[frame]} tets inside out in the stored fit")
+    vol = basis.patch_volumes(model.volumes)
+    penalty = np.repeat(vol / vol.sum() * step.patch_cost**2, len(DEVIATORIC))
+    lam = (params.actuation.stress_cost_mm_per_kPa * 1e-6) ** 2
+    rows_all = node_dofs(fin.observed).ravel()
+    fit = FrameFit(rows_all, fin.targets[frame].ravel(), fin.weights[frame], penalty, lam)
+    labels = face_regions(tetra.nodes[fin.observed[:n]], landmarks)
+    out = []
+    for name in ("linear", "large strain, the linear fit's actuation", "large strain"):
+        t0 = time.perf_counter()
+        if name == "linear":
+            a, d = linear_fit(model, basis, pres, values[frame], fit)
+            a_linear, reached, newton = a, 1.0, 0
+        elif name == "large strain":
+            a, d, reached, newton = large_strain_fit(law, basis, pres, values[frame], fit, print)
+        else:
+            a, d, reached, newton = a_linear, *held(law, basis, pres, values[frame], a_linear)
+        seconds = time.perf_counter() - t0
+        skin = d[rows_all].reshape(-1, 3)[:n]
+        residual = motion_fidelity(skin[None], fin.targets[frame, :n][None], labels).overall[0]
+        J = law.deformation(d)[1]
+        rms = float(np.sqrt(penalty @ a**2 / penalty.sum())) / 1e3
+        out.append([dataset_arg, frame, name, float(residual), int((J <= 0).sum()),
+                    float(J.min()), rms, reached, newton, seconds])  # fmt: skip
+        print(f"{dataset_arg} frame {frame}, {name}: residual {residual:.4f}, "
+              f"{out[-1][4]} tets inside out, min J {J.min():.3f}, RMS stress {rms:.1f} kPa, "
+              f"targets reached {reached:.3f}, {seconds:.0f} s")  # fmt: skip
+    return out
+
+
+COLUMNS = ["dataset", "frame", "law", "residual", "inverted_tets", "min_J", "rms_stress_kPa",
+           "targets_reached", "newton_iterations", "seconds"]  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--dataset", default="demo", help="dataset name (data/<name>) or folder")
+    ap.add_argument("--frame", type=int, default=None, help="capture frame (default: above)")
+    ap.add_argument("--set", action="append", default=[], help="a config override key=value")
+    args = ap.parse_args()
+    rows = measure(args.dataset, args.frame, args.set)
+    record(
+        "bench_large_strain",
+        [
+            Table(
+                "one frame's actuation fitted under the linear and the large-strain law",
+                COLUMNS,
+                rows,
+                notes="residual: relative displacement error of the fitted skin against the "
+                "captured scan (moving skin); stress penalty as stage actuate's, no rate cost",
+            )
+        ],
+        **describe(__doc__, "bench_large_strain"),
+        headline={r[2].replace(" ", "_") + "_residual": r[3] for r in rows}
+        | {r[2].replace(" ", "_") + "_inverted": r[4] for r in rows},
+    )
+
+
+if __name__ == "__main__":
+    main()
