@@ -167,8 +167,8 @@ def solve_static_large_strain(
 
     Converged when |gradient| on the free DOFs <= rtol |f - f_a| + atol (N), f_a the active
     stress's forces at the start. NotConverged when it is not within ``max_iter`` iterations
-    (load in smaller steps: the solve does not). The tangent may be indefinite far from equilibrium: ``solver`` must factorise an indefinite
-    matrix (SuperLU's LU does)."""
+    (load in smaller steps: the solve does not). The tangent may be indefinite far from
+    equilibrium: ``solver`` must factorise an indefinite matrix (SuperLU's LU does)."""
     m = law.model
     n = m.n_dofs
     pres = np.asarray(prescribed, dtype=np.int64)
