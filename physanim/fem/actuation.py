@@ -210,22 +210,22 @@ class StressBasis:
         """Per-tet active stress (M, 6) Pa of coefficients (P, 5) Pa."""
         return self.weights @ (np.asarray(coefficients) @ DEVIATORIC)
 
-    def force_matrix(self, model: FemModel, deformation: NDArray | None = None) -> sp.csc_matrix:
+    def force_matrix(self, model: FemModel, nominal: NDArray | None = None) -> sp.csc_matrix:
         """(3N, 5P) active nodal forces of ``model``'s mesh, N per Pa of each coefficient
         (patch-major): column (p, k) is -sum_e w_ep V_e B_e^T DEVIATORIC[k], what
-        ``model_force_operator(model)`` makes of that stress field; with the tets'
-        ``deformation`` gradients F (M, 3, 3), the large-strain forces of that stress held
-        in the material frame (:mod:`physanim.fem.hyperelastic`): node a of tet e gets
-        -w_ep V_e F_e S_k grad N_a, S_k the tensor of DEVIATORIC[k]."""
+        ``model_force_operator(model)`` makes of that stress field; with ``nominal``
+        (5, M, 3, 3), each tet's change of nominal stress per Pa of each direction at a
+        deformed state (``NeoHookeanANP.nominal_per_direction`` of
+        :mod:`physanim.fem.hyperelastic`), the large-strain forces: node a of tet e gets
+        -w_ep V_e nominal[k, e] grad N_a."""
         # per direction k, each tet's 12 nodal forces summed over the patches' tets: a sixth
         # of the products through the (3N, 6M) stress operator and no Kronecker product (a
         # 2 mm demo mesh, 150k tets: 1.2 s against 2.5 s)
-        if deformation is None:
+        if nominal is None:
             b = strain_displacement(model.grads) * model.volumes[:, None, None]  # (M, 6, 12)
             per_tet = -np.einsum("mij,ki->kmj", b, DEVIATORIC)  # (5, M, 12)
         else:
-            FS = np.einsum("mij,kjl->kmil", deformation, DEVIATORIC[:, VOIGT_INDEX])  # (5, M, 3, 3)
-            per_tet = -np.einsum("m,kmil,mal->kmai", model.volumes, FS, model.grads)
+            per_tet = -np.einsum("m,kmil,mal->kmai", model.volumes, nominal, model.grads)
             per_tet = per_tet.reshape(len(DEVIATORIC), len(model.tets), 12)
         m, n_dirs, p = len(model.tets), len(DEVIATORIC), self.n_patches
         dofs, indptr = element_dofs(model.tets).ravel(), 12 * np.arange(m + 1)

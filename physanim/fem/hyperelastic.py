@@ -24,6 +24,20 @@ stress S_a held in each tet's material frame, with energy
 so it turns with the tissue (a rotated tet feels no torque from it, where a stress held in
 the rest configuration would twist it), and for small strain it is the linear model's active
 stress: E_a -> sum_e V_e S_a,e : eps_e, the nodal forces -sum_e V_e B_e^T S_a,e.
+
+An active stress has a limit: along a direction where S_a is a compression (an eigenvalue
+s < 0), a homogeneous stretch lam of incompressible tissue has energy ~ (mu + s) lam^2 / 2 for
+large lam, so beyond s = -mu nothing in the tet resists the stretch and only its
+neighbours hold it. Active *strain* (``actuation="strain"``) has no such limit: the tissue's
+rest shape itself changes, F = F_e F_a, with the isochoric active strain
+
+    F_a = expm(eps_a),  eps_a = -sigma_a / (2 mu)   (symmetric, trace-free: det F_a = 1),
+
+and the shear energy of the elastic part F_e = F F_a^-1,
+tr(F_e^T F_e) = F : (F G), G = (F_a F_a^T)^-1 = expm(sigma_a / mu). The actuation is given
+in the same units (Pa, the active stress it is at small strain: eps_a -> -C^-1 sigma_a for the
+trace-free part), so one field of coefficients drives either form. Its energy is the
+neo-Hookean energy of F_e, bounded below for any actuation: a tet relaxes to F = F_a.
 """
 
 from __future__ import annotations
@@ -34,13 +48,15 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from physanim.fem.actuation import VOIGT_INDEX
+from physanim.fem.actuation import DEVIATORIC, VOIGT_INDEX
 from physanim.fem.linsolve import factorize
 from physanim.fem.model import FemModel
 from physanim.fem.statics import free_dofs
 
 #: Armijo constant and smallest step of the Newton line search
 ARMIJO, MIN_STEP = 1e-4, 1e-8
+#: the forms of the actuation (module docstring)
+ACTUATIONS = ("stress", "strain")
 
 
 def tensors(voigt: NDArray) -> NDArray:
@@ -60,13 +76,17 @@ def _strain_map(grads: NDArray) -> NDArray:
 
 @dataclass(frozen=True)
 class NeoHookeanANP:
-    """The module's energy on an assembled 'anp' :class:`FemModel` (its mu, S, w_vol)."""
+    """The module's energy on an assembled 'anp' :class:`FemModel` (its mu, S, w_vol), with
+    the actuation as an active ``"stress"`` or an active ``"strain"`` (module docstring)."""
 
     model: FemModel
+    actuation: str = "stress"
 
     def __post_init__(self) -> None:
         if self.model.G is None:
             raise ValueError("the large-strain law needs the 'anp' element formulation")
+        if self.actuation not in ACTUATIONS:
+            raise ValueError(f"actuation must be one of {ACTUATIONS}, not {self.actuation!r}")
 
     def deformation(self, d: NDArray) -> tuple[NDArray, NDArray]:
         """Deformation gradients F (M, 3, 3) and their determinants J (M,) of d (3N,) m."""
@@ -75,20 +95,85 @@ class NeoHookeanANP:
         F = np.eye(3) + np.einsum("mai,maj->mij", u, m.grads)
         return F, np.linalg.det(F)
 
+    def toward(self, d: NDArray, target: NDArray) -> NDArray:
+        """The point on the way from ``d`` to ``target`` (3N,) m, the way halved until no tet
+        is inside out (``d`` itself where even 1e-8 of it inverts one)."""
+        t, move = 1.0, np.asarray(target) - d
+        while np.any(self.deformation(d + t * move)[1] <= 0):
+            if t < MIN_STEP:
+                return np.array(d, dtype=np.float64)
+            t /= 2
+        return d + t * move
+
+    def _strain_metric(self, active: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """G = expm(sigma_a / mu) (M, 3, 3) of the active strain, with the eigenvalues
+        (M, 3) and eigenvectors (M, 3, 3) of sigma_a / mu."""
+        lam, Q = np.linalg.eigh(tensors(active) / self.model.mu[:, None, None])
+        return np.einsum("mij,mj,mkj->mik", Q, np.exp(lam), Q), lam, Q
+
     def energy(self, d: NDArray, f: NDArray | None = None, active: NDArray | None = None) -> float:
-        """E(d) + E_a(d) - f . d in J for the active stress ``active`` (M, 6) Pa (Voigt);
-        inf where any tet is inverted or flat (J <= 0)."""
+        """E(d) + E_a(d) - f . d in J for the actuation ``active`` (M, 6) Pa (Voigt); inf
+        where any tet is inverted or flat (J <= 0)."""
         F, J = self.deformation(d)
         if np.any(J <= 0):
             return float("inf")
         m = self.model
-        shear = m.volumes * m.mu / 2 * (J ** (-2 / 3) * np.einsum("mij,mij->m", F, F) - 3)
+        strain = active is not None and self.actuation == "strain"
+        FG = F @ self._strain_metric(active)[0] if strain else F
+        shear = m.volumes * m.mu / 2 * (J ** (-2 / 3) * np.einsum("mij,mij->m", F, FG) - 3)
         theta = m.S @ np.log(J)
         total = float(shear.sum() + 0.5 * m.w_vol @ theta**2)
-        if active is not None:
+        if active is not None and not strain:
             green = np.einsum("mki,mkj->mij", F, F) - np.eye(3)
             total += 0.5 * float(m.volumes @ np.einsum("mij,mij->m", tensors(active), green))
         return total - (0.0 if f is None else float(np.asarray(f) @ d))
+
+    def _scatter(self, P: NDArray) -> NDArray:
+        """Nodal forces (3N,) N of per-tet nominal stresses times volume P (M, 3, 3) N m."""
+        m = self.model
+        fe = np.einsum("mk,mkl->ml", P.reshape(-1, 9), _strain_map(m.grads))
+        return np.bincount(m.dofs.ravel(), fe.ravel(), minlength=m.n_dofs)
+
+    def active_forces(self, d: NDArray, active: NDArray) -> NDArray:
+        """The nodal forces (3N,) N the actuation ``active`` (M, 6) Pa adds at d (3N,) m:
+        minus its change of the energy's gradient."""
+        m = self.model
+        F, J = self.deformation(d)
+        V = m.volumes[:, None, None]
+        if self.actuation == "stress":
+            return -self._scatter(V * (F @ tensors(active)))
+        # the shear's nominal stress with G, less that with I (the pressure does not change)
+        FdG = F @ (self._strain_metric(active)[0] - np.eye(3))
+        i1 = np.einsum("mij,mij->m", F, FdG)
+        FiT = np.linalg.inv(F).transpose(0, 2, 1)
+        scale = (m.volumes * m.mu * J ** (-2 / 3))[:, None, None]
+        return -self._scatter(scale * (FdG - (i1 / 3)[:, None, None] * FiT))
+
+    def nominal_per_direction(self, d: NDArray, active: NDArray | None = None) -> NDArray:
+        """(5, M, 3, 3): each tet's change of nominal stress (Pa) per Pa of each
+        DEVIATORIC direction of the actuation, at d (3N,) m and the actuation ``active``
+        (M, 6) Pa (for an active stress it does not depend on it): what
+        ``StressBasis.force_matrix`` takes for the forces per coefficient."""
+        F, J = self.deformation(d)
+        S_k = DEVIATORIC[:, VOIGT_INDEX]  # (5, 3, 3)
+        if self.actuation == "stress":
+            return np.einsum("mij,kjl->kmil", F, S_k)
+        # dG = Dexp(X)[S_k / mu] at X = sigma_a / mu (Daleckii-Krein: in X's eigenbasis, the
+        # divided differences of exp); the shear stress's change mu J^-2/3 (F dG - (F:F dG)/3 F^-T)
+        zero = np.zeros((len(F), 6)) if active is None else active
+        _, lam, Q = self._strain_metric(zero)
+        li, lj = lam[:, :, None], lam[:, None, :]
+        gap = li - lj
+        close = np.abs(gap) < 1e-9
+        divided = np.where(
+            close, np.exp((li + lj) / 2), np.exp(lj) * np.expm1(gap) / np.where(close, 1.0, gap)
+        )
+        in_basis = np.einsum("mai,kab,mbj->kmij", Q, S_k, Q)
+        dG = np.einsum("mia,kmab,mjb->kmij", Q, divided[None] * in_basis, Q)  # mu dG per Pa
+        FdG = np.einsum("mij,kmjl->kmil", F, dG)
+        i1 = np.einsum("mij,kmij->km", F, FdG)
+        FiT = np.linalg.inv(F).transpose(0, 2, 1)
+        return J[None, :, None, None] ** (-2 / 3) * (FdG - (i1 / 3)[..., None, None] * FiT[None])
 
     def gradient(
         self,
@@ -102,33 +187,39 @@ class NeoHookeanANP:
         m = self.model
         F, J = self.deformation(d)
         FiT = np.linalg.inv(F).transpose(0, 2, 1)
-        i1 = np.einsum("mij,mij->m", F, F)
+        strain = active is not None and self.actuation == "strain"
+        G = self._strain_metric(active)[0] if strain else None
+        FG = F if G is None else F @ G
+        i1 = np.einsum("mij,mij->m", F, FG)
         a = J ** (-2 / 3)
         pressure = m.S.T @ (m.w_vol * (m.S @ np.log(J)))  # (M,) N m, dE/d(ln J_e)
         scale = (m.volumes * m.mu * a)[:, None, None]
-        P = scale * (F - (i1 / 3)[:, None, None] * FiT) + pressure[:, None, None] * FiT
-        S_a = None if active is None else tensors(active)
+        P = scale * (FG - (i1 / 3)[:, None, None] * FiT) + pressure[:, None, None] * FiT
+        S_a = None if active is None or strain else tensors(active)
         if S_a is not None:
             P = P + m.volumes[:, None, None] * (F @ S_a)
-        dFdu = _strain_map(m.grads)
-        fe = np.einsum("mk,mkl->ml", P.reshape(-1, 9), dFdu)
-        g = np.bincount(m.dofs.ravel(), fe.ravel(), minlength=m.n_dofs)
+        g = self._scatter(P)
         if f is not None:
             g = g - f
         if not hessian:
             return g, None
-        # d(F^-T)/dF [ij, kl] = -F^-T_il F^-T_kj; the isochoric tangent (J^-2/3 mu V times)
+        # d(F^-T)/dF [ij, kl] = -F^-T_il F^-T_kj; d(F G)_ij/dF_kl = delta_ik G_lj; the
+        # isochoric tangent (J^-2/3 mu V times)
         inv_t = np.einsum("mil,mkj->mijkl", FiT, FiT)
         outer = lambda A, B: np.einsum("mij,mkl->mijkl", A, B)  # noqa: E731
-        eye = np.einsum("ik,jl->ijkl", np.eye(3), np.eye(3))[None]
+        if G is None:
+            dFG = np.einsum("ik,jl->ijkl", np.eye(3), np.eye(3))[None]
+        else:
+            dFG = np.einsum("ik,mlj->mijkl", np.eye(3), G)
         c = i1[:, None, None, None, None]
         shear = (
-            eye - (2 / 3) * (outer(F, FiT) + outer(FiT, F))
+            dFG - (2 / 3) * (outer(FG, FiT) + outer(FiT, FG))
             + (2 / 9) * c * outer(FiT, FiT) + (1 / 3) * c * inv_t
         )  # fmt: skip
         D = scale[..., None, None] * shear - pressure[:, None, None, None, None] * inv_t
         if S_a is not None:  # d(F S_a)_ij / dF_kl = delta_ik S_a,lj
             D = D + np.einsum("ik,mlj->mijkl", np.eye(3), m.volumes[:, None, None] * S_a)
+        dFdu = _strain_map(m.grads)
         blocks = np.einsum("mak,mab,mbl->mkl", dFdu, D.reshape(-1, 9, 9), dFdu)
         rows = np.repeat(m.dofs, 12, axis=1).ravel()
         cols = np.tile(m.dofs, (1, 12)).ravel()
@@ -159,8 +250,8 @@ def solve_static_large_strain(
     max_iter: int = 30,
     solver: str = "superlu",
 ) -> tuple[NDArray, int]:
-    """The equilibrium d (3N,) m of ``law`` under dead loads ``f`` (3N,) N and the active
-    stress ``active`` (M, 6) Pa (Voigt) with d[prescribed] = ``values`` (m), by Newton's
+    """The equilibrium d (3N,) m of ``law`` under dead loads ``f`` (3N,) N and the
+    actuation ``active`` (M, 6) Pa (Voigt) with d[prescribed] = ``values`` (m), by Newton's
     method with a backtracking line search on the energy from ``start`` (default: the rest;
     the prescribed values are taken first along the tangent, the step halved until no tet
     inverts); and the Newton iterations taken.
@@ -181,18 +272,13 @@ def solve_static_large_strain(
         move = np.zeros(n)
         move[pres] = jump
         move[free] = -factorize(H[free][:, free].tocsc(), solver)(H[free][:, pres] @ jump)
-        t = 1.0
-        while np.any(law.deformation(d + t * move)[1] <= 0) and t > MIN_STEP:
-            t /= 2
-        d = d + t * move
+        d = law.toward(d, d + move)
         d[pres] = values
         if np.any(law.deformation(d)[1] <= 0):
             raise NotConverged("the prescribed values invert tets: prescribe them in steps")
-    # the scale of the loads: the dead loads and the active stress's forces at the start
-    active_force = (
-        law.gradient(d, None, active)[0] - law.gradient(d)[0] if active is not None else 0
-    )
-    tol = rtol * float(np.linalg.norm((force - active_force)[free])) + atol
+    # the scale of the loads: the dead loads and the actuation's forces at the start
+    active_force = 0 if active is None else law.active_forces(d, active)
+    tol = rtol * float(np.linalg.norm((force + active_force)[free])) + atol
     for it in range(max_iter):
         g, H = law.gradient(d, force, active, hessian=True)
         g_u = g[free]

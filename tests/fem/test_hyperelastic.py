@@ -1,16 +1,18 @@
-"""The large-strain law (isochoric neo-Hookean, averaged nodal pressure on ln J, active stress
-in the material frame) against the linear 'anp' model at rest, finite differences, and the
-analytic homogeneous uniaxial stretch under a dead load (in tension, and in a compression that
-turns the linear model inside out) and under a uniform active stress."""
+"""The large-strain law (isochoric neo-Hookean, averaged nodal pressure on ln J, the actuation
+as an active stress in the material frame or an active strain) against the linear 'anp' model
+at rest, finite differences, and the analytic homogeneous uniaxial stretch under a dead load
+(in tension, and in a compression that turns the linear model inside out), under a uniform
+active stress, and under a uniform active strain (the tissue takes its shape exactly)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 from scipy.optimize import fsolve
 
-from physanim.fem.actuation import StressBasis, model_force_operator
-from physanim.fem.hyperelastic import NeoHookeanANP, solve_static_large_strain
+from physanim.fem.actuation import DEVIATORIC, StressBasis, model_force_operator
+from physanim.fem.hyperelastic import NeoHookeanANP, NotConverged, solve_static_large_strain
 from physanim.fem.materials import TetMaterials
 from physanim.fem.model import build_model
 from physanim.fem.params import ModelParams
@@ -21,10 +23,11 @@ E, NU, SIDE = 10e3, 0.45, 0.01  # Pa, -, m
 MU, KAPPA = E / (2 * (1 + NU)), E / (3 * (1 - 2 * NU))
 
 
-def _law(shape=(2, 2, 2)) -> NeoHookeanANP:
+def _law(shape=(2, 2, 2), actuation: str = "stress") -> NeoHookeanANP:
     nodes, tets = box_mesh(shape, (SIDE,) * 3)
     mat = TetMaterials.uniform(len(tets), E=E, nu=NU, eta=1.0, rho=1000.0)
-    return NeoHookeanANP(build_model(nodes, tets, mat, ModelParams(formulation="anp")))
+    model = build_model(nodes, tets, mat, ModelParams(formulation="anp"))
+    return NeoHookeanANP(model, actuation)
 
 
 def _stretched(law: NeoHookeanANP, rng: np.random.Generator) -> np.ndarray:
@@ -51,16 +54,31 @@ def test_small_strain_active_stress_is_the_linear_models():
     g, _ = law.gradient(np.zeros(law.model.n_dofs), active=sigma)
     assert g == pytest.approx(model_force_operator(law.model) @ sigma.ravel(), rel=1e-12)
     basis = StressBasis.covering(law.model.nodes, law.model.tets, SIDE / 2)
-    rest = np.tile(np.eye(3), (len(law.model.tets), 1, 1))
+    rest = law.nominal_per_direction(np.zeros(law.model.n_dofs))
     assert abs(basis.force_matrix(law.model, rest) - basis.force_matrix(law.model)).max() < 1e-15
 
 
-@pytest.mark.parametrize("with_active", [False, True])
-def test_gradient_and_hessian_match_finite_differences(with_active):
+def test_small_active_strain_is_the_linear_models_active_stress():
+    """An active strain of 1e-4 shear moduli pulls the rest like the linear model's active
+    stress of the same Pa (to first order), per tet and per coefficient."""
+    law = _law(actuation="strain")
+    rng = np.random.default_rng(2)
+    sigma = 1e-4 * MU * rng.normal(size=(len(law.model.tets), 5)) @ DEVIATORIC
+    linear = -model_force_operator(law.model) @ sigma.ravel()
+    g = law.active_forces(np.zeros(law.model.n_dofs), sigma)
+    assert np.linalg.norm(g - linear) <= 1e-3 * np.linalg.norm(linear)
+    basis = StressBasis.covering(law.model.nodes, law.model.tets, SIDE / 2)
+    rest = law.nominal_per_direction(np.zeros(law.model.n_dofs), sigma)
+    small = basis.force_matrix(law.model)
+    assert abs(basis.force_matrix(law.model, rest) - small).max() <= 1e-3 * abs(small).max()
+
+
+@pytest.mark.parametrize("actuation", [None, "stress", "strain"])
+def test_gradient_and_hessian_match_finite_differences(actuation):
     rng = np.random.default_rng(1)
-    law = _law()
+    law = _law(actuation=actuation or "stress")
     d = _stretched(law, rng)
-    active = 2e3 * rng.normal(size=(len(law.model.tets), 6)) if with_active else None
+    active = 2e3 * rng.normal(size=(len(law.model.tets), 6)) if actuation else None
     assert law.deformation(d)[1].min() > 0.3
     g, H = law.gradient(d, active=active, hessian=True)
     v, h = rng.normal(size=d.size) * SIDE * 1e-2, 1e-4
@@ -85,9 +103,25 @@ def test_active_forces_turn_with_the_tissue_and_are_linear_in_the_coefficients()
     g = law.gradient(turned, active=basis.stress(c))[0].reshape(-1, 3)
     assert g == pytest.approx(at_rest @ R.T, abs=1e-9 * abs(at_rest).max())
     d = _stretched(law, rng)
-    F, _ = law.deformation(d)
     slope = law.gradient(d, active=basis.stress(c))[0] - law.gradient(d)[0]
-    assert -slope == pytest.approx(basis.force_matrix(law.model, F) @ c.ravel(), rel=1e-9)
+    forces = basis.force_matrix(law.model, law.nominal_per_direction(d))
+    assert -slope == pytest.approx(forces @ c.ravel(), rel=1e-9)
+    assert law.active_forces(d, basis.stress(c)) == pytest.approx(-slope, rel=1e-12)
+
+
+def test_active_strain_forces_per_coefficient_match_finite_differences():
+    """At a large deformation and a large active strain (coefficients of order the shear
+    modulus), the forces per coefficient are the derivative of the active forces."""
+    rng = np.random.default_rng(4)
+    law = _law(actuation="strain")
+    basis = StressBasis.covering(law.model.nodes, law.model.tets, SIDE / 2)
+    c = MU * rng.normal(size=(basis.n_patches, 5))
+    d = _stretched(law, rng)
+    forces = basis.force_matrix(law.model, law.nominal_per_direction(d, basis.stress(c)))
+    dc, h = rng.normal(size=c.shape), 1e-3 * MU
+    fd = (law.active_forces(d, basis.stress(c + h * dc))
+          - law.active_forces(d, basis.stress(c - h * dc))) / (2 * h)  # fmt: skip
+    assert np.linalg.norm(fd - forces @ dc.ravel()) <= 1e-6 * np.linalg.norm(fd)
 
 
 def test_energy_is_infinite_once_a_tet_turns_inside_out():
@@ -170,3 +204,39 @@ def test_a_uniform_active_stress_contracts_the_tissue_to_the_analytic_stretch():
     assert u[:, 0] == pytest.approx((lam - 1) * law.model.nodes[:, 0], abs=1e-6 * SIDE)
     assert u[:, 1] == pytest.approx((lat - 1) * law.model.nodes[:, 1], abs=1e-6 * SIDE)
     assert 0.55 < lam < 0.75
+
+
+def _shape_of(strain_along_x: float) -> NDArray:
+    """The Voigt actuation (Pa) whose active strain is diag(e, -e/2, -e/2), e the argument."""
+    out = np.zeros(6)
+    out[:3] = -2 * MU * strain_along_x * np.array([1.0, -0.5, -0.5])
+    return out
+
+
+def test_a_uniform_active_strain_gives_the_tissue_its_shape():
+    """Actuated by a uniform active strain that shortens it to a quarter along x, the free
+    cube (symmetry planes only) takes the shape F_a = expm(eps_a) exactly, stress free; the
+    same actuation as an active stress (1.4 shear moduli of compression across x) has no
+    equilibrium."""
+    for actuation in ("strain", "stress"):
+        law = _law(actuation=actuation)
+        pres, _ = _cube_under(0.0, law)
+        e = np.log(0.25)
+        active = np.tile(_shape_of(e), (len(law.model.tets), 1))
+        d = np.zeros(law.model.n_dofs)
+        if actuation == "stress":
+            assert active[0, 1] < -MU  # beyond the active stress's limit
+            with pytest.raises(NotConverged):
+                for step in np.linspace(0.25, 1.0, 4):
+                    d, _ = solve_static_large_strain(
+                        law, pres, np.zeros(len(pres)), active=step * active, start=d
+                    )
+            continue
+        for step in np.linspace(0.25, 1.0, 4):
+            d, _ = solve_static_large_strain(
+                law, pres, np.zeros(len(pres)), active=step * active, start=d
+            )
+        stretch = np.exp([e, -e / 2, -e / 2])
+        assert d.reshape(-1, 3) == pytest.approx((stretch - 1) * law.model.nodes, abs=1e-6 * SIDE)
+        F, _ = law.deformation(d)  # the elastic part F F_a^-1 is the identity: no stress
+        assert abs(F @ np.diag(1 / stretch) - np.eye(3)).max() < 1e-6
