@@ -8,13 +8,18 @@ couple or reweight frames) twice:
 
 - linear: the static linear FEM at the basis material, one least-squares solve;
 - large strain: :mod:`physanim.fem.hyperelastic` (isochoric neo-Hookean, averaged nodal
-  pressure on ln J, the active stress in the material frame), by Levenberg-Marquardt on the
-  coefficients, each trial solved to equilibrium by Newton's method, with the targets taken
-  from the passive equilibrium (the conditions alone) to the capture in continuation steps
-  (halved where a step fails).
+  pressure on ln J), with the coefficients as an active stress in the material frame and as
+  an active strain (``--forms``), by Levenberg-Marquardt on the coefficients, each trial
+  solved to equilibrium by Newton's method, with the targets taken from the passive
+  equilibrium (the conditions alone) to the capture in continuation steps (halved where a
+  step fails).
 
-Between them: the large-strain law under the linear fit's actuation (loaded in steps, each
-halved where Newton's method fails; ``targets_reached`` is the share of the load reached).
+Between them, for each form: the large-strain law under the linear fit's actuation (loaded
+in steps, each halved where Newton's method fails; ``targets_reached`` is the share of the
+load reached). It also counts the tets where the linear fit's active stress is beyond the
+active stress's limit (a compression larger than the shear modulus along some direction:
+there nothing in the tet resists a stretch, module docstring of
+:mod:`physanim.fem.hyperelastic`).
 For each: the fit's residual (relative displacement error of the skin against the captured
 scan, moving skin only, as stage ``actuate`` reports it), tets inside out, the smallest
 volume ratio J, the RMS active stress (kPa) and the seconds. The frame is the one whose
@@ -23,7 +28,7 @@ fit takes minutes (each trial a few Newton steps on the whole mesh): the benchma
 whether that law can follow the capture, not a product cost.
 
 Run: .venv/bin/python benchmarks/bench_large_strain.py [--dataset demo] [--frame F]
-[--set key=value]...
+[--forms stress strain] [--set key=value]...
 """
 
 from __future__ import annotations
@@ -39,7 +44,13 @@ from physanim.config import load_config
 from physanim.evaluate.fidelity import face_regions, motion_fidelity
 from physanim.fem.actuation import DEVIATORIC
 from physanim.fem.geometry import node_dofs
-from physanim.fem.hyperelastic import NeoHookeanANP, NotConverged, solve_static_large_strain
+from physanim.fem.hyperelastic import (
+    ACTUATIONS,
+    NeoHookeanANP,
+    NotConverged,
+    solve_static_large_strain,
+    tensors,
+)
 from physanim.fem.linsolve import factorize
 from physanim.fem.statics import free_dofs
 from physanim.pipeline import stage_inputs
@@ -111,10 +122,9 @@ def large_strain_fit(law, basis, pres, values, fit: FrameFit, log):
         saved, current, failed, accepted = (a, d), fit.value(d, a), False, 0
         for _ in range(LM_LAST if share == 1.0 else LM_ITERATIONS):
             stress = basis.stress(a.reshape(-1, len(DEVIATORIC)))
-            F, _ = law.deformation(d)
             _, H = law.gradient(d, active=stress, hessian=True)
             solve = factorize(H[free][:, free].tocsc(), "superlu")
-            forces = basis.force_matrix(model, F)[free]
+            forces = basis.force_matrix(model, law.nominal_per_direction(d, stress))[free]
             sens = solve(forces.toarray())
             while True:
                 da = fit.step(d, a, sens[at], damping)
@@ -123,7 +133,7 @@ def large_strain_fit(law, basis, pres, values, fit: FrameFit, log):
                 try:
                     stress = basis.stress((a + da).reshape(-1, len(DEVIATORIC)))
                     moved, its = solve_static_large_strain(
-                        law, pres, values, active=stress, start=_right_side_out(law, d, trial),
+                        law, pres, values, active=stress, start=law.toward(d, trial),
                         max_iter=NEWTON_ITERATIONS,
                     )  # fmt: skip
                     newton += its
@@ -156,9 +166,10 @@ def large_strain_fit(law, basis, pres, values, fit: FrameFit, log):
     return a, d, reached, newton
 
 
-def held(law, basis, pres, values, a, steps=8):
+def held(law, basis, pres, values, a, log, steps=8):
     """The large-strain equilibrium (3N,) m under the coefficients ``a`` (5P,) Pa, loaded in
-    ``steps`` (halved where a step fails); the share of the load reached, Newton iterations."""
+    ``steps`` (halved where a step fails, doubled again after one that converges); the share
+    of the load reached, Newton iterations."""
     d, reached, newton, step = np.zeros(law.model.n_dofs), 0.0, 0, 1.0 / steps
     while reached < 1.0 and step >= SMALLEST_STEP / 8:
         share = min(1.0, reached + step)
@@ -169,20 +180,23 @@ def held(law, basis, pres, values, a, steps=8):
             )
         except NotConverged:
             step /= 2
+            log(f"  load {share:.3f}: Newton did not converge; load step halved to {step:.4f}")
             continue
-        reached, newton = share, newton + its
+        reached, newton, step = share, newton + its, min(2 * step, 1.0 / steps)
+        log(f"  load {share:.3f}: {its} Newton iterations, min J {law.deformation(d)[1].min():.3f}")
     return d, reached, newton
 
 
-def _right_side_out(law, d, trial):
-    """``trial``, or the way from ``d`` towards it halved until no tet is inside out."""
-    t = 1.0
-    while np.any(law.deformation(d + t * (trial - d))[1] <= 0) and t > 1e-6:
-        t /= 2
-    return d + t * (trial - d)
+def beyond_limit(model, stress) -> int:
+    """Tets (count) whose active stress (M, 6) Pa compresses some direction by more than the
+    tet's shear modulus."""
+    smallest = np.linalg.eigvalsh(tensors(stress))[:, 0]
+    return int((smallest < -model.mu).sum())
 
 
-def measure(dataset_arg: str, frame: int | None, overrides: list[str]) -> list[list]:
+def measure(
+    dataset_arg: str, frame: int | None, forms: list[str], overrides: list[str]
+) -> list[list]:
     """Rows (law, residual, inverted, min J, RMS stress, seconds) of one dataset's frame."""
     config, _ = load_config(
         FACE.config_model(), [FACE.default_config], [*dataset_overrides(dataset_arg), *overrides]
@@ -197,7 +211,7 @@ def measure(dataset_arg: str, frame: int | None, overrides: list[str]) -> list[l
         params, tetra, fin.conditions, fin.observed, fin.targets, fin.weights, landmarks
     )
     model, basis, n = step.model, step.basis, fin.n_captured
-    law = NeoHookeanANP(model)
+    law = NeoHookeanANP(model)  # the active stress, for the frame's choice and J
     pres = fin.conditions.prescribed_dofs
     values = fin.conditions.prescribed(fin.conditions.frame_dt * np.arange(len(fin.targets)))[0]
     if frame is None:  # the stored fit's frame with the most tets inside out
@@ -217,22 +231,37 @@ def measure(dataset_arg: str, frame: int | None, overrides: list[str]) -> list[l
     fit = FrameFit(rows_all, fin.targets[frame].ravel(), fin.weights[frame], penalty, lam)
     labels = face_regions(tetra.nodes[fin.observed[:n]], landmarks)
     out = []
-    for name in ("linear", "large strain, the linear fit's actuation", "large strain"):
+    runs = [("linear", None)] + [
+        (f"active {form}, {how}", form)
+        for form in forms
+        for how in ("the linear fit's actuation", "fitted")
+    ]
+    for name, form in runs:
         t0 = time.perf_counter()
-        if name == "linear":
+        if form is None:
             a, d = linear_fit(model, basis, pres, values[frame], fit)
             a_linear, reached, newton = a, 1.0, 0
-        elif name == "large strain":
-            a, d, reached, newton = large_strain_fit(law, basis, pres, values[frame], fit, print)
+            stress = basis.stress(a.reshape(-1, len(DEVIATORIC)))
+            beyond = beyond_limit(model, stress)
+            print(f"{dataset_arg} frame {frame}: the linear fit's active stress is beyond its "
+                  f"limit in {beyond} of {len(model.tets)} tets")  # fmt: skip
+        elif name.endswith("fitted"):
+            a, d, reached, newton = large_strain_fit(
+                NeoHookeanANP(model, form), basis, pres, values[frame], fit, print
+            )
         else:
-            a, d, reached, newton = a_linear, *held(law, basis, pres, values[frame], a_linear)
+            form_law = NeoHookeanANP(model, form)
+            a, d, reached, newton = (
+                a_linear,
+                *held(form_law, basis, pres, values[frame], a_linear, print),
+            )
         seconds = time.perf_counter() - t0
         skin = d[rows_all].reshape(-1, 3)[:n]
         residual = motion_fidelity(skin[None], fin.targets[frame, :n][None], labels).overall[0]
         J = law.deformation(d)[1]
         rms = float(np.sqrt(penalty @ a**2 / penalty.sum())) / 1e3
         out.append([dataset_arg, frame, name, float(residual), int((J <= 0).sum()),
-                    float(J.min()), rms, reached, newton, seconds])  # fmt: skip
+                    float(J.min()), rms, reached, newton, seconds, beyond])  # fmt: skip
         print(f"{dataset_arg} frame {frame}, {name}: residual {residual:.4f}, "
               f"{out[-1][4]} tets inside out, min J {J.min():.3f}, RMS stress {rms:.1f} kPa, "
               f"targets reached {reached:.3f}, {seconds:.0f} s")  # fmt: skip
@@ -240,16 +269,26 @@ def measure(dataset_arg: str, frame: int | None, overrides: list[str]) -> list[l
 
 
 COLUMNS = ["dataset", "frame", "law", "residual", "inverted_tets", "min_J", "rms_stress_kPa",
-           "targets_reached", "newton_iterations", "seconds"]  # fmt: skip
+           "targets_reached", "newton_iterations", "seconds",
+           "linear_fit_tets_beyond_stress_limit"]  # fmt: skip
+
+
+def _key(law: str) -> str:
+    """A headline key of a row's law: linear, stress_held, strain_fitted, ..."""
+    if law == "linear":
+        return law
+    return law.split()[1].rstrip(",") + ("_fitted" if law.endswith("fitted") else "_held")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--dataset", default="demo", help="dataset name (data/<name>) or folder")
     ap.add_argument("--frame", type=int, default=None, help="capture frame (default: above)")
+    ap.add_argument("--forms", nargs="+", default=["stress", "strain"], choices=ACTUATIONS,
+                    help="the actuation's forms under the large-strain law")  # fmt: skip
     ap.add_argument("--set", action="append", default=[], help="a config override key=value")
     args = ap.parse_args()
-    rows = measure(args.dataset, args.frame, args.set)
+    rows = measure(args.dataset, args.frame, args.forms, args.set)
     record(
         "bench_large_strain",
         [
@@ -262,8 +301,10 @@ def main() -> None:
             )
         ],
         **describe(__doc__, "bench_large_strain"),
-        headline={r[2].replace(" ", "_") + "_residual": r[3] for r in rows}
-        | {r[2].replace(" ", "_") + "_inverted": r[4] for r in rows},
+        headline={_key(r[2]) + "_residual": r[3] for r in rows}
+        | {_key(r[2]) + "_inverted": r[4] for r in rows}
+        | {_key(r[2]) + "_targets_reached": r[7] for r in rows}
+        | {"linear_fit_tets_beyond_stress_limit": rows[0][10]},
     )
 
 

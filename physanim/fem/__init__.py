@@ -11,7 +11,8 @@ interpolated between frames like the driven motion), ``kinematics`` (linear / co
 ``stepping`` (adaptive Newmark between frames) and ``monitors`` (energy, stress, inversion per
 frame). ``inverse``: the actuation with which the static FEM reproduces observed motion.
 ``hyperelastic``: a large-strain law (isochoric neo-Hookean, averaged nodal pressure on ln J,
-active stress in the material frame) and its static Newton solve.
+the actuation as an active stress in the material frame or an active strain) and its static
+Newton solve.
 
 Element formulations (``SimulateParams.formulation``), thick-walled cylinder under internal
 pressure (plane strain, quarter section, b/a = 2), computed / Lame inner displacement:
