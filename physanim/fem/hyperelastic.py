@@ -36,8 +36,10 @@ rest shape itself changes, F = F_e F_a, with the isochoric active strain
 and the shear energy of the elastic part F_e = F F_a^-1,
 tr(F_e^T F_e) = F : (F G), G = (F_a F_a^T)^-1 = expm(sigma_a / mu). The actuation is given
 in the same units (Pa, the active stress it is at small strain: eps_a -> -C^-1 sigma_a for the
-trace-free part), so one field of coefficients drives either form. Its energy is the
-neo-Hookean energy of F_e, bounded below for any actuation: a tet relaxes to F = F_a.
+trace-free part, mu each tet's shear modulus in the model), so one field of coefficients
+drives either form, and on an edited material acts as the active stress does at small strain.
+Its energy is the neo-Hookean energy of F_e, bounded below for any actuation: a free tet
+relaxes to F = F_a.
 """
 
 from __future__ import annotations
