@@ -158,7 +158,7 @@ def evaluate_face(
     """The measures of one run and its summary (rounded figures: mm, s, ratios); ``cache``
     keeps the scan's embedding in the tets (``physanim.mesh.embed``) and what the truth
     gives of the capture alone (:func:`capture_against_truth`)."""
-    from physanim.evaluate.fidelity import REGIONS, face_regions
+    from physanim.evaluate.fidelity import REGIONS
     from physanim.evaluate.measures import driven_free_lag, landmark_measures, region_lags
     from physanim.mesh.embed import embedded_displacements
     from physanim.names import name_index
@@ -191,12 +191,12 @@ def evaluate_face(
     # the FEM moves a sample of the scan's vertices as it moves the rendered scan: the same
     # points for every tet mesh, compared with the captured scan's same vertices
     scan_v = run.scan_vertices
-    rng = np.random.default_rng(0)
-    scan_idx = np.sort(rng.choice(len(scan_v), min(len(scan_v), params.error_max_points), False))
+    scan_idx, labels = scan_sample(
+        scan_v, dict(zip(names, run.landmarks, strict=True)), params.error_max_points
+    )
     fem_scan = scan_v + embedded_displacements(
         scan_v, run.scan_side, run.nodes, run.tets, run.mouth, disp, cache
     )
-    labels = face_regions(scan_v[scan_idx], dict(zip(names, run.landmarks, strict=True)))
     fem_moved = fem_scan[:, scan_idx] - scan_v[scan_idx]
     captured = _rows(run.kinematic, scan_idx) - scan_v[scan_idx]
     lags = {}
@@ -224,6 +224,19 @@ def evaluate_face(
         **fields,
     )
     return evaluation, summary
+
+
+def scan_sample(
+    scan_vertices: NDArray, landmarks: dict[str, NDArray], max_points: int
+) -> tuple[NDArray, NDArray]:
+    """The scan vertices the truth's figures use, the same for every tet mesh: their ids (S,)
+    (at most ``max_points``, a fixed random draw) and their regions (S,)
+    (``physanim.evaluate.fidelity.face_regions`` of the feature points ``landmarks``)."""
+    from physanim.evaluate.fidelity import face_regions
+
+    n = len(scan_vertices)
+    ids = np.sort(np.random.default_rng(0).choice(n, min(n, max_points), False))
+    return ids, face_regions(np.asarray(scan_vertices)[ids], landmarks)
 
 
 def philtrum_curves(run: FaceRun) -> dict[str, NDArray]:
