@@ -8,33 +8,35 @@ couple or reweight frames) twice:
 
 - linear: the static linear FEM at the basis material, one least-squares solve;
 - large strain: :mod:`physanim.fem.hyperelastic` (isochoric neo-Hookean, averaged nodal
-  pressure on ln J), with the coefficients as an active stress in the material frame and as
-  an active strain (``--forms``), by Levenberg-Marquardt on the coefficients, each trial
-  solved to equilibrium by Newton's method, with the targets taken from the passive
-  equilibrium (the conditions alone) to the capture in continuation steps (halved where a
-  step fails).
+  pressure on ln J), with the coefficients as an active stress in the material frame or as
+  an active strain, by Levenberg-Marquardt on the coefficients, each trial solved to
+  equilibrium by Newton's method, with the targets taken from the passive equilibrium (the
+  conditions alone) to the capture in continuation steps (halved where a step fails).
 
-Between them, for each form: the large-strain law under the linear fit's actuation (loaded
-in steps, each halved where Newton's method fails; ``targets_reached`` is the share of the
-load reached). It also counts the tets where the linear fit's active stress is beyond the
-active stress's limit (a compression larger than the shear modulus along some direction:
-there nothing in the tet resists a stretch, module docstring of
-:mod:`physanim.fem.hyperelastic`).
-Beside them, the bound of any law on this mesh: the node displacements that carry the
-captured scan's motion best through its embedding in the tets (least squares).
+Other rows (``--rows``): each form under the linear fit's actuation (loaded in steps, each
+halved where Newton's method fails; ``targets_reached`` is the share of the load reached),
+and the bound of any law on this mesh: the node displacements that carry the captured scan's
+motion best through its embedding in the tets (least squares). With ``--warm K``, the K
+frames after the active strain's fit, each fitted from the frame before (its actuation and
+shape, the targets taken in one step): what a fit over a performance would cost per frame.
+
 For each: the fit's residual (relative displacement error of the skin against the captured
-scan, moving skin only, as stage ``actuate`` reports it), with a ground truth its error against
-the actor's true motion as stage ``evaluate`` measures it (its sample of scan vertices, moved
-through their embedding in the tets), beside the captured scan's own (issue #32 asks the FEM
-to be within 0.03 of it), tets inside out, the smallest
-volume ratio J, the RMS active stress (kPa) and the seconds. The frame is the one whose
-stored fit (stage ``actuate``) turns the most tets inside out, unless given. A large-strain
-fit takes minutes (each trial a few Newton steps on the whole mesh): the benchmark measures
-whether that law can follow the capture, not a product cost.
+scan, moving skin only, as stage ``actuate`` reports it), with a ground truth its error
+against the actor's true motion as stage ``evaluate`` measures it (its sample of scan
+vertices, moved through their embedding in the tets) beside the captured scan's own (issue
+#32 asks the FEM to be within 0.03 of it), tets inside out, the smallest volume ratio J, the
+RMS actuation (kPa) and the seconds; and the tets where the linear fit's active stress is
+beyond the active stress's limit (a compression larger than the shear modulus along some
+direction: there nothing in the tet resists a stretch, module docstring of
+:mod:`physanim.fem.hyperelastic`). The frame is the one whose stored fit (stage
+``actuate``) turns the most tets inside out, unless given. A large-strain fit takes minutes
+(each trial a few Newton steps on the whole mesh): the benchmark measures whether that law
+can follow the capture, not a product cost.
 
 Run: .venv/bin/python benchmarks/bench_large_strain.py [--dataset demo] [--frame F]
 [--rows mesh_bound linear stress_held stress_fitted strain_held strain_fitted]
-[--set key=value]... (default rows: mesh_bound linear strain_fitted, about 25 min on 2 cores)
+[--warm K] [--set key=value]... (default rows: mesh_bound linear strain_fitted, about 25 min on
+2 cores)
 """
 
 from __future__ import annotations
@@ -113,19 +115,25 @@ def linear_fit(model, basis, pres, values, fit: FrameFit):
     return a, d
 
 
-def large_strain_fit(law, basis, pres, values, fit: FrameFit, log):
-    """The large-strain law's fit by continuation (module docstring): coefficients, the
-    equilibrium, the share of the targets reached and the Newton iterations taken."""
+def large_strain_fit(law, basis, pres, values, fit: FrameFit, log, start=None):
+    """The large-strain law's fit by continuation (module docstring), or from ``start`` (the
+    coefficients and equilibrium of the frame before: its skin taken to this frame's targets
+    in one step, halved where it fails): coefficients, the equilibrium, the share of the
+    targets reached and the Newton iterations taken."""
     model = law.model
     free = free_dofs(model.n_dofs, pres)
     at = np.searchsorted(free, fit.rows)
     d, newton = np.zeros(model.n_dofs), 0
-    for share in np.linspace(0.25, 1.0, 4):  # the conditions alone, in steps
-        d, its = solve_static_large_strain(law, pres, share * values, start=d)
-        newton += its
-    a = np.zeros(basis.size)
+    if start is None:
+        for share in np.linspace(0.25, 1.0, 4):  # the conditions alone, in steps
+            d, its = solve_static_large_strain(law, pres, share * values, start=d)
+            newton += its
+        a = np.zeros(basis.size)
+    else:
+        a, d = (np.array(x) for x in start)
     full, passive = fit.y.copy(), d[fit.rows].copy()
-    reached, step, damping = 0.0, FIRST_STEP, 1e-3 * fit.lam
+    step = FIRST_STEP if start is None else 1.0
+    reached, damping = 0.0, 1e-3 * fit.lam
     while reached < 1.0 and step >= SMALLEST_STEP:
         share = min(1.0, reached + step)
         fit.y = passive + share * (full - passive)
@@ -249,9 +257,10 @@ def mesh_bound(align, dense, tetra, model, frame, weight=1e-3):
 
 
 def measure(
-    dataset_arg: str, frame: int | None, keys: list[str], overrides: list[str]
+    dataset_arg: str, frame: int | None, keys: list[str], overrides: list[str], warm: int = 0
 ) -> list[list]:
-    """Rows (``COLUMNS``) of one dataset's frame for the laws ``keys`` (``ROWS``)."""
+    """Rows (``COLUMNS``) of one dataset's frame for the laws ``keys`` (``ROWS``), and with
+    ``strain_fitted`` the ``warm`` frames after it, each fitted from the one before."""
     config, _ = load_config(
         FACE.config_model(), [FACE.default_config], [*dataset_overrides(dataset_arg), *overrides]
     )
@@ -282,12 +291,29 @@ def measure(
     penalty = np.repeat(vol / vol.sum() * step.patch_cost**2, len(DEVIATORIC))
     lam = (params.actuation.stress_cost_mm_per_kPa * 1e-6) ** 2
     rows_all = node_dofs(fin.observed).ravel()
-    fit = FrameFit(rows_all, fin.targets[frame].ravel(), fin.weights[frame], penalty, lam)
     labels = face_regions(tetra.nodes[fin.observed[:n]], landmarks)
-    fem_vs_truth, captured = against_truth(config, align, dense, tetra, frame)
+
+    def frame_fit(f):
+        return FrameFit(rows_all, fin.targets[f].ravel(), fin.weights[f], penalty, lam)
+
+    def row(name, f, a, d, reached, newton, seconds, truth_of):
+        fem_vs_truth, captured = truth_of
+        skin = d[rows_all].reshape(-1, 3)[:n]
+        residual = motion_fidelity(skin[None], fin.targets[f, :n][None], labels).overall[0]
+        J = law.deformation(d)[1]
+        rms = float(np.sqrt(penalty @ a**2 / penalty.sum())) / 1e3
+        truth = None if fem_vs_truth is None else fem_vs_truth(d)
+        print(f"{dataset_arg} frame {f}, {name}: residual {residual:.4f}, truth {truth}, "
+              f"{int((J <= 0).sum())} tets inside out, min J {J.min():.3f}, RMS stress "
+              f"{rms:.1f} kPa, targets reached {reached:.3f}, {seconds:.0f} s")  # fmt: skip
+        return [dataset_arg, f, name, float(residual), truth, captured, int((J <= 0).sum()),
+                float(J.min()), rms, reached, newton, seconds, beyond]  # fmt: skip
+
+    fit = frame_fit(frame)
+    truth_of = against_truth(config, align, dense, tetra, frame)
     print(f"{dataset_arg} frame {frame}: the captured motion's error against the truth "
-          f"{captured}")  # fmt: skip
-    out = []
+          f"{truth_of[1]}")  # fmt: skip
+    out, beyond = [], None
     for key in ["linear", *(k for k in ROWS if k in keys and k != "linear")]:
         name, form = ROWS[key], key.split("_")[0]
         t0 = time.perf_counter()
@@ -311,18 +337,19 @@ def measure(
                 a_linear,
                 *held(form_law, basis, pres, values[frame], a_linear, print),
             )
-        seconds = time.perf_counter() - t0
-        skin = d[rows_all].reshape(-1, 3)[:n]
-        residual = motion_fidelity(skin[None], fin.targets[frame, :n][None], labels).overall[0]
-        J = law.deformation(d)[1]
-        rms = float(np.sqrt(penalty @ a**2 / penalty.sum())) / 1e3
-        truth = None if fem_vs_truth is None else fem_vs_truth(d)
-        out.append([dataset_arg, frame, name, float(residual), truth, captured,
-                    int((J <= 0).sum()), float(J.min()), rms, reached, newton, seconds,
-                    beyond])  # fmt: skip
-        print(f"{dataset_arg} frame {frame}, {name}: residual {residual:.4f}, truth {truth}, "
-              f"{out[-1][6]} tets inside out, min J {J.min():.3f}, RMS stress {rms:.1f} kPa, "
-              f"targets reached {reached:.3f}, {seconds:.0f} s")  # fmt: skip
+        out.append(row(name, frame, a, d, reached, newton, time.perf_counter() - t0, truth_of))
+        if key == "strain_fitted":
+            fitted = (a, d)
+    for f in (
+        range(frame + 1, min(frame + 1 + warm, len(values))) if "strain_fitted" in keys else ()
+    ):
+        t0 = time.perf_counter()
+        a, d, reached, newton = large_strain_fit(
+            NeoHookeanANP(model, "strain"), basis, pres, values[f], frame_fit(f), print, fitted
+        )
+        seconds, fitted = time.perf_counter() - t0, (a, d)
+        truth_f = against_truth(config, align, dense, tetra, f)
+        out.append(row(WARM, f, a, d, reached, newton, seconds, truth_f))
     return out
 
 
@@ -346,9 +373,15 @@ ROWS = {
 DEFAULT_ROWS = ["mesh_bound", "linear", "strain_fitted"]
 
 
-def _key(law: str) -> str:
-    """The ``ROWS`` key of a row's law."""
-    return next(k for k, v in ROWS.items() if v == law)
+#: the rows of the frames after, each fitted from the one before (``--warm``)
+WARM = "active strain, fitted from the frame before"
+
+
+def _key(row: list) -> str:
+    """The headline key of a row: its ``ROWS`` key, or strain_warm_<frame>."""
+    if row[2] == WARM:
+        return f"strain_warm_{row[1]}"
+    return next(k for k, v in ROWS.items() if v == row[2])
 
 
 def main() -> None:
@@ -357,9 +390,13 @@ def main() -> None:
     ap.add_argument("--frame", type=int, default=None, help="capture frame (default: above)")
     ap.add_argument("--rows", nargs="+", default=DEFAULT_ROWS, choices=list(ROWS),
                     help=f"the laws to measure (default: {' '.join(DEFAULT_ROWS)})")  # fmt: skip
+    ap.add_argument(
+        "--warm", type=int, default=0, help="with strain_fitted: the frames after it to fit, "
+        "each from the one before",
+    )  # fmt: skip
     ap.add_argument("--set", action="append", default=[], help="a config override key=value")
     args = ap.parse_args()
-    rows = measure(args.dataset, args.frame, args.rows, args.set)
+    rows = measure(args.dataset, args.frame, args.rows, args.set, args.warm)
     record(
         "bench_large_strain",
         [
@@ -372,10 +409,11 @@ def main() -> None:
             )
         ],
         **describe(__doc__, "bench_large_strain"),
-        headline={_key(r[2]) + "_residual": r[3] for r in rows}
-        | {_key(r[2]) + "_error_vs_truth": r[4] for r in rows}
-        | {_key(r[2]) + "_inverted": r[6] for r in rows}
-        | {_key(r[2]) + "_targets_reached": r[9] for r in rows}
+        headline={_key(r) + "_residual": r[3] for r in rows}
+        | {_key(r) + "_error_vs_truth": r[4] for r in rows}
+        | {_key(r) + "_inverted": r[6] for r in rows}
+        | {_key(r) + "_targets_reached": r[9] for r in rows}
+        | {_key(r) + "_seconds": r[11] for r in rows if r[2] == WARM}
         | {"captured_error_vs_truth": rows[0][5]}
         | {"linear_fit_tets_beyond_stress_limit": rows[0][12]},
     )
