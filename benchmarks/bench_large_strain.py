@@ -62,7 +62,7 @@ from physanim.fem.hyperelastic import (
     solve_static_large_strain,
     tensors,
 )
-from physanim.fem.linsolve import factorize
+from physanim.fem.linsolve import SymmetricFactors, factorize
 from physanim.fem.statics import free_dofs
 from physanim.mesh.embed import embedding_matrix
 from physanim.pipeline import stage_inputs
@@ -123,10 +123,10 @@ def large_strain_fit(law, basis, pres, values, fit: FrameFit, log, start=None):
     model = law.model
     free = free_dofs(model.n_dofs, pres)
     at = np.searchsorted(free, fit.rows)
-    d, newton = np.zeros(model.n_dofs), 0
+    d, newton, factors = np.zeros(model.n_dofs), 0, SymmetricFactors()
     if start is None:
         for share in np.linspace(0.25, 1.0, 4):  # the conditions alone, in steps
-            d, its = solve_static_large_strain(law, pres, share * values, start=d)
+            d, its = solve_static_large_strain(law, pres, share * values, start=d, factors=factors)
             newton += its
         a = np.zeros(basis.size)
     else:
@@ -141,7 +141,7 @@ def large_strain_fit(law, basis, pres, values, fit: FrameFit, log, start=None):
         for _ in range(LM_LAST if share == 1.0 else LM_ITERATIONS):
             stress = basis.stress(a.reshape(-1, len(DEVIATORIC)))
             _, H = law.gradient(d, active=stress, hessian=True)
-            solve = factorize(H[free][:, free].tocsc(), "superlu")
+            solve = factors(H[free][:, free])
             forces = basis.force_matrix(model, law.nominal_per_direction(d, stress))[free]
             sens = solve(forces.toarray())
             while True:
@@ -152,7 +152,7 @@ def large_strain_fit(law, basis, pres, values, fit: FrameFit, log, start=None):
                     stress = basis.stress((a + da).reshape(-1, len(DEVIATORIC)))
                     moved, its = solve_static_large_strain(
                         law, pres, values, active=stress, start=law.toward(d, trial),
-                        max_iter=NEWTON_ITERATIONS,
+                        max_iter=NEWTON_ITERATIONS, factors=factors,
                     )  # fmt: skip
                     newton += its
                     value = fit.value(moved, a + da)

@@ -44,14 +44,15 @@ relaxes to F = F_a.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from physanim.fem.actuation import DEVIATORIC, VOIGT_INDEX
-from physanim.fem.linsolve import factorize
+from physanim.fem.assembly import assemble
+from physanim.fem.linsolve import SymmetricFactors
 from physanim.fem.model import FemModel
 from physanim.fem.statics import free_dofs
 
@@ -83,6 +84,9 @@ class NeoHookeanANP:
 
     model: FemModel
     actuation: str = "stress"
+    #: the last actuation's strain metric (``_strain_metric``): a static solve evaluates the
+    #: energy many times under one actuation, and the eigendecompositions took a tenth of it
+    _last_metric: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.model.G is None:
@@ -110,8 +114,13 @@ class NeoHookeanANP:
     def _strain_metric(self, active: NDArray) -> tuple[NDArray, NDArray, NDArray]:
         """G = expm(sigma_a / mu) (M, 3, 3) of the active strain, with the eigenvalues
         (M, 3) and eigenvectors (M, 3, 3) of sigma_a / mu."""
+        last = self._last_metric
+        if "active" in last and np.array_equal(last["active"], active):
+            return last["metric"]
         lam, Q = np.linalg.eigh(tensors(active) / self.model.mu[:, None, None])
-        return np.einsum("mij,mj,mkj->mik", Q, np.exp(lam), Q), lam, Q
+        metric = np.einsum("mij,mj,mkj->mik", Q, np.exp(lam), Q), lam, Q
+        last.update(active=np.array(active, dtype=np.float64), metric=metric)
+        return metric
 
     def energy(self, d: NDArray, f: NDArray | None = None, active: NDArray | None = None) -> float:
         """E(d) + E_a(d) - f . d in J for the actuation ``active`` (M, 6) Pa (Voigt); inf
@@ -222,10 +231,8 @@ class NeoHookeanANP:
         if S_a is not None:  # d(F S_a)_ij / dF_kl = delta_ik S_a,lj
             D = D + np.einsum("ik,mlj->mijkl", np.eye(3), m.volumes[:, None, None] * S_a)
         dFdu = _strain_map(m.grads)
-        blocks = np.einsum("mak,mab,mbl->mkl", dFdu, D.reshape(-1, 9, 9), dFdu)
-        rows = np.repeat(m.dofs, 12, axis=1).ravel()
-        cols = np.tile(m.dofs, (1, 12)).ravel()
-        H = sp.csr_matrix((blocks.ravel(), (rows, cols)), shape=(m.n_dofs, m.n_dofs))
+        blocks = dFdu.transpose(0, 2, 1) @ (D.reshape(-1, 9, 9) @ dFdu)  # (M, 12, 12)
+        H = assemble(blocks, m.tets, len(m.nodes))
         # the volumetric part's Gauss-Newton term: Gn^T diag(w) Gn, Gn = S d(ln J)/dd
         rows_ln = np.einsum("mij,maj->mai", FiT, m.grads).reshape(-1, 12)
         dln = sp.csr_matrix(
@@ -250,7 +257,7 @@ def solve_static_large_strain(
     rtol: float = 1e-6,
     atol: float = 1e-9,
     max_iter: int = 30,
-    solver: str = "superlu",
+    factors: SymmetricFactors | None = None,
 ) -> tuple[NDArray, int]:
     """The equilibrium d (3N,) m of ``law`` under dead loads ``f`` (3N,) N and the
     actuation ``active`` (M, 6) Pa (Voigt) with d[prescribed] = ``values`` (m), by Newton's
@@ -261,7 +268,8 @@ def solve_static_large_strain(
     Converged when |gradient| on the free DOFs <= rtol |f - f_a| + atol (N), f_a the active
     stress's forces at the start. NotConverged when it is not within ``max_iter`` iterations
     (load in smaller steps: the solve does not). The tangent may be indefinite far from
-    equilibrium: ``solver`` must factorise an indefinite matrix (SuperLU's LU does)."""
+    equilibrium: ``factors`` (default: a new :class:`SymmetricFactors`, its analysis shared
+    by the solve's iterations; pass one to share it across solves) factorises it."""
     m = law.model
     n = m.n_dofs
     pres = np.asarray(prescribed, dtype=np.int64)
@@ -269,11 +277,12 @@ def solve_static_large_strain(
     force = np.zeros(n) if f is None else np.asarray(f, dtype=np.float64)
     d = np.zeros(n) if start is None else np.array(start, dtype=np.float64)
     jump = np.asarray(values, dtype=np.float64) - d[pres]
+    factors = SymmetricFactors() if factors is None else factors
     if np.any(jump):  # take the prescribed values along the tangent at the start
         _, H = law.gradient(d, force, active, hessian=True)
         move = np.zeros(n)
         move[pres] = jump
-        move[free] = -factorize(H[free][:, free].tocsc(), solver)(H[free][:, pres] @ jump)
+        move[free] = -factors(H[free][:, free])(H[free][:, pres] @ jump)
         d = law.toward(d, d + move)
         d[pres] = values
         if np.any(law.deformation(d)[1] <= 0):
@@ -287,7 +296,7 @@ def solve_static_large_strain(
         if np.linalg.norm(g_u) <= tol:
             return d, it
         step = np.zeros(n)
-        step[free] = -factorize(H[free][:, free].tocsc(), solver)(g_u)
+        step[free] = -factors(H[free][:, free])(g_u)
         slope = float(g_u @ step[free])
         if not slope < 0:  # an indefinite tangent: fall back on steepest descent
             step[free], slope = -g_u, -float(g_u @ g_u)

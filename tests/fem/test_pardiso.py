@@ -10,7 +10,7 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from physanim.fem.linsolve import factorize, factorize_split
+from physanim.fem.linsolve import SymmetricFactors, factorize, factorize_split
 from physanim.fem.numba_threads import keeps_thread_count
 from physanim.fem.pardiso import PardisoFactors, has_pardiso
 from tests.fem.test_parallel_solvers import _tet_model
@@ -89,3 +89,22 @@ def test_results_do_not_depend_on_the_thread_count_numba_runs_on():
         solve = factorize_split(A_el, G, w, "pardiso", PardisoFactors("indefinite", np.float32))
         got.append(solve(b))
     np.testing.assert_array_equal(got[0], got[1])
+
+
+def test_symmetric_factors_take_the_ldl_only_where_the_matrix_is_indefinite():
+    # a large-strain tangent is indefinite away from equilibrium: the LL^T refuses it and the
+    # Bunch-Kaufman LDL^T solves it; definite matrices of one pattern share one LL^T analysis
+    model, free, A_el, G = _tet_model()
+    A = sp.csr_matrix(A_el)
+    b = np.random.default_rng(6).normal(size=(A.shape[0], 2))
+    factors = SymmetricFactors()
+    shifted = A - sp.diags(np.full(A.shape[0], np.median(A.diagonal())))
+    for matrix in (A, 2 * A, shifted):
+        ref = spla.spsolve(matrix.tocsc(), b)
+        got = factors(matrix)(b)
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+    assert len(factors._factors["spd"]._handles) == 1
+    assert factors._factors["indefinite"]._handles[0].n == A.shape[0]
+    other = A + sp.eye(A.shape[0], k=A.shape[0] - 1) + sp.eye(A.shape[0], k=1 - A.shape[0])
+    ref = spla.spsolve(other.tocsc(), b)  # another pattern: analysed afresh
+    np.testing.assert_allclose(factors(other)(b), ref, rtol=0, atol=1e-9 * np.abs(ref).max())
