@@ -117,8 +117,9 @@ def linear_fit(model, basis, pres, values, fit: FrameFit):
 
 def large_strain_fit(law, basis, pres, values, fit: FrameFit, log, start=None):
     """The large-strain law's fit by continuation (module docstring), or from ``start`` (the
-    coefficients and equilibrium of the frame before: its skin taken to this frame's targets
-    in one step, halved where it fails): coefficients, the equilibrium, the share of the
+    coefficients and equilibrium of the frame before, moved to this frame's conditions under
+    those coefficients, then its skin taken to this frame's targets in one step, halved where
+    it fails): coefficients, the equilibrium, the share of the
     targets reached and the Newton iterations taken."""
     model = law.model
     free = free_dofs(model.n_dofs, pres)
@@ -129,8 +130,10 @@ def large_strain_fit(law, basis, pres, values, fit: FrameFit, log, start=None):
             d, its = solve_static_large_strain(law, pres, share * values, start=d, factors=factors)
             newton += its
         a = np.zeros(basis.size)
-    else:
+    else:  # the frame before's actuation held while the conditions move to this frame's
         a, d = (np.array(x) for x in start)
+        d, _, its = held(law, basis, pres, values, a, log, steps=1, start=(a, d))
+        newton += its
     full, passive = fit.y.copy(), d[fit.rows].copy()
     step = FIRST_STEP if start is None else 1.0
     reached, damping = 0.0, 1e-3 * fit.lam
@@ -184,18 +187,22 @@ def large_strain_fit(law, basis, pres, values, fit: FrameFit, log, start=None):
     return a, d, reached, newton
 
 
-def held(law, basis, pres, values, a, log, steps=8):
-    """The large-strain equilibrium (3N,) m under the coefficients ``a`` (5P,) Pa, loaded in
-    ``steps`` (halved where a step fails, doubled again after one that converges); the share
-    of the load reached, Newton iterations."""
-    d, reached, newton, step = np.zeros(law.model.n_dofs), 0.0, 0, 1.0 / steps
+def held(law, basis, pres, values, a, log, steps=8, start=None):
+    """The large-strain equilibrium (3N,) m under the coefficients ``a`` (5P,) Pa and the
+    prescribed ``values``, loaded from the rest, or from ``start`` (coefficients and the
+    equilibrium under them), in ``steps`` (halved where a step fails, doubled again after
+    one that converges); the share of the load reached, Newton iterations."""
+    n = law.model.n_dofs
+    a0, d = (np.zeros_like(a), np.zeros(n)) if start is None else (np.array(x) for x in start)
+    v0, reached, newton, step = d[pres].copy(), 0.0, 0, 1.0 / steps
     while reached < 1.0 and step >= SMALLEST_STEP / 8:
         share = min(1.0, reached + step)
-        stress = basis.stress(share * a.reshape(-1, len(DEVIATORIC)))
+        stress = basis.stress((a0 + share * (a - a0)).reshape(-1, len(DEVIATORIC)))
         try:
             d, its = solve_static_large_strain(
-                law, pres, share * values, active=stress, start=d, max_iter=2 * NEWTON_ITERATIONS
-            )
+                law, pres, v0 + share * (values - v0), active=stress, start=d,
+                max_iter=2 * NEWTON_ITERATIONS,
+            )  # fmt: skip
         except NotConverged:
             step /= 2
             log(f"  load {share:.3f}: Newton did not converge; load step halved to {step:.4f}")
