@@ -184,7 +184,8 @@ class SymmetricFactors:
 
     Why not LDL^T always: PARDISO's indefinite solves of many right-hand sides run an order
     slower (the demo's tangent, 16,725 free DOFs, 1,835 columns, 2 cores: 45 s against 4 s;
-    one column 8 ms either way). Its factorisation takes 0.3-0.5 s there, SuperLU's 4.0 s.
+    one column 8 ms either way). Its factorisation takes 0.3-0.5 s there, SuperLU's 4.0 s;
+    an indefinite matrix costs the refused LL^T's attempt besides.
     """
 
     def __init__(self) -> None:
