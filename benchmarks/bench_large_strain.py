@@ -35,8 +35,8 @@ can follow the capture, not a product cost.
 
 Run: .venv/bin/python benchmarks/bench_large_strain.py [--dataset demo] [--frame F]
 [--rows mesh_bound linear stress_held stress_fitted strain_held strain_fitted]
-[--warm K] [--set key=value]... (default rows: mesh_bound linear strain_fitted, about 25 min on
-2 cores)
+[--warm K] [--set key=value]... (default rows: mesh_bound linear strain_fitted, about 7 min on
+2 cores with MKL's PARDISO, longer with SuperLU)
 """
 
 from __future__ import annotations
@@ -375,7 +375,7 @@ ROWS = {
 }
 
 
-#: what ``make bench`` measures (about 25 min on 2 cores): the other rows take as long and
+#: what ``make bench`` measures (about 7 min on 2 cores): the other rows take as long and
 #: stall or miss the capture (docs/VALIDATION.md)
 DEFAULT_ROWS = ["mesh_bound", "linear", "strain_fitted"]
 
