@@ -25,13 +25,15 @@ scan, moving skin only, as stage ``actuate`` reports it), with a ground truth it
 against the actor's true motion as stage ``evaluate`` measures it (its sample of scan
 vertices, moved through their embedding in the tets) beside the captured scan's own (issue
 #32 asks the FEM to be within 0.03 of it), tets inside out, the smallest volume ratio J, the
-RMS actuation (kPa) and the seconds; and the tets where the linear fit's active stress is
-beyond the active stress's limit (a compression larger than the shear modulus along some
-direction: there nothing in the tet resists a stretch, module docstring of
-:mod:`physanim.fem.hyperelastic`). The frame is the one whose stored fit (stage
-``actuate``) turns the most tets inside out, unless given. A large-strain fit takes minutes
-(each trial a few Newton steps on the whole mesh): the benchmark measures whether that law
-can follow the capture, not a product cost.
+RMS actuation (kPa), the seconds, the tets stretched or shortened by more than
+``STRETCHED`` along some direction with the nodes of the tets that touch them (the region a
+large-strain law confined to where the tissue strains largely would cover); and the tets
+where the linear fit's active stress is beyond the active stress's limit (a compression
+larger than the shear modulus along some direction: there nothing in the tet resists a
+stretch, module docstring of :mod:`physanim.fem.hyperelastic`). The frame is the one whose
+stored fit (stage ``actuate``) turns the most tets inside out, unless given. A large-strain
+fit takes minutes (each trial a few Newton steps on the whole mesh): the benchmark measures
+whether that law can follow the capture, not a product cost.
 
 Run: .venv/bin/python benchmarks/bench_large_strain.py [--dataset demo] [--frame F]
 [--rows mesh_bound linear stress_held stress_fitted strain_held strain_fitted]
@@ -76,6 +78,9 @@ FIRST_STEP, SMALLEST_STEP = 0.2, 0.0125
 LM_ITERATIONS, LM_LAST, NEWTON_ITERATIONS = 3, 8, 10
 #: relative gain of the objective below which a continuation step's iterations stop
 LM_GAIN = 1e-3
+#: a principal stretch this far from 1 counts as large strain (``stretched``)
+STRETCHED = 0.2
+STRETCHED_KEY = f"tets_stretched_over_{round(100 * STRETCHED)}_percent"
 
 
 class FrameFit:
@@ -212,6 +217,17 @@ def held(law, basis, pres, values, a, log, steps=8, start=None):
     return d, reached, newton
 
 
+def stretched(law, d, over=STRETCHED) -> tuple[int, int]:
+    """Tets (count) stretched or shortened by more than ``over`` (a share) along some direction
+    at d (3N,) m, and the nodes of the tets that touch them: the region a large-strain law
+    confined to where the tissue strains largely would have to cover."""
+    F, _ = law.deformation(d)
+    tets = law.model.tets
+    far = np.abs(np.linalg.svd(F, compute_uv=False) - 1).max(axis=1) > over
+    touching = np.isin(tets, tets[far]).any(axis=1)
+    return int(far.sum()), len(np.unique(tets[touching]))
+
+
 def beyond_limit(model, stress) -> int:
     """Tets (count) whose active stress (M, 6) Pa compresses some direction by more than the
     tet's shear modulus."""
@@ -310,11 +326,14 @@ def measure(
         J = law.deformation(d)[1]
         rms = float(np.sqrt(penalty @ a**2 / penalty.sum())) / 1e3
         truth = None if fem_vs_truth is None else fem_vs_truth(d)
+        far, region = stretched(law, d)
         print(f"{dataset_arg} frame {f}, {name}: residual {residual:.4f}, truth {truth}, "
               f"{int((J <= 0).sum())} tets inside out, min J {J.min():.3f}, RMS stress "
-              f"{rms:.1f} kPa, targets reached {reached:.3f}, {seconds:.0f} s")  # fmt: skip
+              f"{rms:.1f} kPa, targets reached {reached:.3f}, {seconds:.0f} s; {far} of "
+              f"{len(J)} tets stretched by more than {STRETCHED:.0%}, {region} of "
+              f"{len(tetra.nodes)} nodes in them and the tets touching them")  # fmt: skip
         return [dataset_arg, f, name, float(residual), truth, captured, int((J <= 0).sum()),
-                float(J.min()), rms, reached, newton, seconds, beyond]  # fmt: skip
+                float(J.min()), rms, reached, newton, seconds, beyond, far, region]  # fmt: skip
 
     fit = frame_fit(frame)
     truth_of = against_truth(config, align, dense, tetra, frame)
@@ -362,7 +381,8 @@ def measure(
 
 COLUMNS = ["dataset", "frame", "law", "residual", "error_vs_truth", "captured_error_vs_truth",
            "inverted_tets", "min_J", "rms_stress_kPa", "targets_reached", "newton_iterations",
-           "seconds", "linear_fit_tets_beyond_stress_limit"]  # fmt: skip
+           "seconds", "linear_fit_tets_beyond_stress_limit", STRETCHED_KEY,
+           "nodes_of_the_stretched_tets_and_their_neighbours"]  # fmt: skip
 #: the rows: key -> the law's name (the linear fit always runs: the others start from it)
 ROWS = {
     "mesh_bound": "least squares to the captured scan (any law's bound on this mesh)",
@@ -422,7 +442,8 @@ def main() -> None:
         | {_key(r) + "_targets_reached": r[9] for r in rows}
         | {_key(r) + "_seconds": r[11] for r in rows if r[2] == WARM}
         | {"captured_error_vs_truth": rows[0][5]}
-        | {"linear_fit_tets_beyond_stress_limit": rows[0][12]},
+        | {"linear_fit_tets_beyond_stress_limit": rows[0][12]}
+        | {_key(r) + "_" + STRETCHED_KEY: r[13] for r in rows},
     )
 
 
