@@ -7,10 +7,11 @@ process: the landmark tracker (stage ``track``: markers found, labelled, tracked
 and smoothed) and dense capture (stage ``dense``: flow both ways, lifting, head pose, fill),
 each timed end to end from the stored ingest output. Then, at each expression's peak, the
 relative displacement error on the moving skin (``physanim.evaluate.fidelity``, every scan
-vertex) overall and per region of the kinematic scan (the scan bound to the fitted face model,
-``dense.method: kinematic``) and of the dense capture, the dense capture's error on the skin
-the camera sees in the neutral frame only (``visible``: the rest is filled from neighbours),
-and the RMS error of the moving skin in mm (targets: <= 0.10 relative and <= 0.5 mm RMS at
+vertex on the true surface: as ``evaluate``, the scan's filled holes have no truth) overall
+and per region of the kinematic scan (the scan bound to the fitted face model, ``dense.method:
+kinematic``) and of the dense capture, the dense capture's error on the skin the camera sees
+in the neutral frame only (``visible``: the rest is filled from neighbours), and the RMS error
+of the moving skin in mm (targets: <= 0.10 relative and <= 0.5 mm RMS at
 every peak, issue #31).
 
 With ``--markerless`` every dataset is also measured rendered without painted markers
@@ -96,15 +97,21 @@ def measure(
     print(f"{label}: landmark tracker {track_s:.3f} s/frame; dense {dense_s:.3f} s/frame")
 
     truth = load_truth(dataset / "ground_truth.zarr", T)
-    true_u = follow_truth(vertices, truth.vertices, truth.faces).displacement
-    labels = face_regions(vertices, align.landmark_positions())
-    variants = {"kinematic scan": kinematic - vertices[None], "dense capture": dense.displacement}
+    true = follow_truth(vertices, truth.vertices, truth.faces)
+    on = true.on_truth()  # as evaluate: the scan's filled holes have no truth
+    true_u = true.displacement[:, on]
+    labels = face_regions(vertices[on], align.landmark_positions())
+    variants = {
+        "kinematic scan": (kinematic - vertices[None])[:, on],
+        "dense capture": dense.displacement[:, on],
+    }
+    seen_on = dense.seen[on]
     rows = []
     for peak, f in truth.peak_frames().items():
         moving = (true_u[f] ** 2).sum(axis=1) > 1e-6
         for name, u in variants.items():
             fid = motion_fidelity(u[f : f + 1], true_u[f : f + 1], labels)
-            seen = relative_error(u[f : f + 1, dense.seen], true_u[f : f + 1, dense.seen])[0]
+            seen = relative_error(u[f : f + 1, seen_on], true_u[f : f + 1, seen_on])[0]
             rms = float(np.sqrt(((u[f] - true_u[f])[moving] ** 2).sum(axis=1).mean()) * 1e3)
             regions = [None if np.isnan(x) else float(x) for x in fid.regions[0]]
             visible = None if np.isnan(seen) else float(seen)

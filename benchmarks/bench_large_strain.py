@@ -246,8 +246,9 @@ def against_truth(config, align, dense, tetra, frame):
     scan_v = align.scan_vertices
     ids, labels = scan_sample(scan_v, align.landmark_positions(), params.error_max_points)
     truth = load_truth(path, frame + 1)
-    search = params.closest_points
-    true_u = follow_truth(scan_v[ids], truth.vertices, truth.faces, search).displacement[frame]
+    true = follow_truth(scan_v[ids], truth.vertices, truth.faces, params.closest_points)
+    on = true.on_truth(params.truth_max_distance_m)  # as evaluate: filled holes have no truth
+    ids, labels, true_u = ids[on], labels[on], true.displacement[frame, on]
     W = _embedding(align, tetra, ids)
 
     def fidelity(moved: np.ndarray) -> float:

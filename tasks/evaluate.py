@@ -117,7 +117,7 @@ def compute(
 SPEC = StageSpec.typed(
     "evaluate",
     compute,
-    version="18",
+    version="19",
     doc="symmetry cost, mouth corners, lags (free behind driven, FEM behind capture per "
     "region), philtrum peaks; with truth: motion fidelity per "
     "region, lip gap, surface distance, silhouettes and triangle stretch of the moved scan",

@@ -84,10 +84,11 @@ def compute(
         summary = {
             "scan_colour": "error",
             "scan_error_mm": {
-                "median": round(float(np.median(error)), 3),
-                "p95": round(float(np.percentile(error, 95)), 3),
-                "max": round(float(error.max()), 3),
+                "median": round(float(np.nanmedian(error)), 3),
+                "p95": round(float(np.nanpercentile(error, 95)), 3),
+                "max": round(float(np.nanmax(error)), 3),
             },
+            "vertices_without_truth": int(np.isnan(error[0]).sum()),
         }
     with ThreadPoolExecutor(1) as pool:  # the capture is cropped while the tiles render
         crops = pool.submit(
@@ -107,7 +108,7 @@ def compute(
 SPEC = StageSpec.typed(
     "tiles",
     compute,
-    version="6",
+    version="7",
     doc="panel tiles of the capture (cropped, landmarks drawn), the model fit and the captured "
     "scan, front and side, the scan optionally coloured by its error against the truth "
     "(render's tile settings)",

@@ -13,6 +13,8 @@ from matplotlib.figure import Figure as MplFigure
 #: default skin albedo, sRGB 0-1
 SKIN = (0.89, 0.72, 0.62)
 BACKGROUND = (1.0, 1.0, 1.0)
+#: colour of a scalar that has no value (NaN: e.g. an error where there is no truth), sRGB 0-1
+NO_VALUE = (0.6, 0.6, 0.6)
 #: height of the colour-bar strip under the view, pixels
 BAR_HEIGHT = 64
 
@@ -43,7 +45,7 @@ class ColourMap:
         return cls(label=label, clim=(lo, hi if hi > lo else lo + 1.0))
 
     def colours(self, scalars: np.ndarray) -> np.ndarray:
-        """(K,) scalars -> (K, 3) uint8 sRGB."""
+        """(K,) scalars -> (K, 3) uint8 sRGB; NaN -> ``NO_VALUE``."""
         if self.categories is not None:
             table = category_colours(len(self.categories))
             idx = np.clip(np.asarray(scalars).astype(np.int64), 0, len(self.categories) - 1)
@@ -51,6 +53,7 @@ class ColourMap:
         else:
             lo, hi = self.clim
             rgb = colormaps[self.cmap](Normalize(lo, hi, clip=True)(scalars))[:, :3]
+            rgb[~np.isfinite(scalars)] = NO_VALUE
         return np.round(255 * rgb).astype(np.uint8)
 
 

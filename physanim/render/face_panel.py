@@ -34,7 +34,7 @@ FIT_TITLE, KINEMATIC_TITLE, FEM_TITLE = "CANDIDE-style fit", "captured scan", "F
 #: What a side view's title adds to its frontal tile's title.
 SIDE = " (side)"
 #: Colour-bar label of the captured scan's error.
-ERROR_LABEL = "error vs truth (mm)"
+ERROR_LABEL = "error vs truth (mm; grey: no truth)"
 
 
 class TileParams(BaseModel):
@@ -92,11 +92,13 @@ class TileParams(BaseModel):
         frames. Not the percentile of all R x N errors: most are of skin at rest, and the
         demo's chin at the jaw drop (a few frames of a tenth of the scan) was saturated in the
         top colour at 0.7 mm; nor the largest error: a few wild vertices at the scan's edge
-        would leave the rest of the face in the bottom colour."""
+        would leave the rest of the face in the bottom colour. NaN (no truth) is left out
+        and drawn grey."""
         from physanim.render.colours import ColourMap
 
         worst = np.asarray(error_mm).max(axis=0)
-        top = self.error_max_mm or max(float(np.percentile(worst, 99)), 1e-3)
+        worst = worst[np.isfinite(worst)]
+        top = self.error_max_mm or max(float(np.percentile(worst, 99)) if len(worst) else 0, 1e-3)
         return ColourMap(ERROR_LABEL, clim=(0.0, top), cmap="BuPu")
 
 
@@ -225,15 +227,23 @@ def motion_tiles(
         return {k: v for name, f in futures.items() for k, v in _titled(name, f.result()).items()}
 
 
-def scan_error_mm(scan_vertices: NDArray, captured: NDArray, truth: Truth) -> NDArray:
+def scan_error_mm(
+    scan_vertices: NDArray,
+    captured: NDArray,
+    truth: Truth,
+    max_distance_m: float | None = None,
+) -> NDArray:
     """(R, N) mm per scan vertex and frame: the distance between its captured displacement
     (``captured`` (R, N, 3) m minus ``scan_vertices`` (N, 3) m) and its true one (the truth's
     surface point closest to it at the first frame, followed; ``truth`` the same R frames,
-    the first the neutral one)."""
-    from physanim.evaluate.fidelity import follow_truth
+    the first the neutral one); NaN where the vertex has no truth (farther than
+    ``max_distance_m`` from the true surface, by default ``evaluate``'s: a filled hole of
+    the scan)."""
+    from physanim.evaluate.fidelity import TRUTH_MAX_DISTANCE_M, follow_truth
 
-    true = follow_truth(scan_vertices, truth.vertices, truth.faces).displacement
-    return 1e3 * np.linalg.norm(captured - scan_vertices - true, axis=-1)
+    true = follow_truth(scan_vertices, truth.vertices, truth.faces)
+    error = 1e3 * np.linalg.norm(captured - scan_vertices - true.displacement, axis=-1)
+    return np.where(true.on_truth(max_distance_m or TRUTH_MAX_DISTANCE_M), error, np.nan)
 
 
 def fem_tiles(

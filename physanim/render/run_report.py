@@ -226,7 +226,10 @@ def _error_colours(store: StageStore, keys: dict[str, str]) -> dict[str, tuple[A
             error_mm = 1e3 * np.asarray(group[name][...], dtype=np.float64)
             colour_map = TileParams().error_colours(error_mm[None])
             top = colour_map.clim[1]
-            legend = f"largest error vs truth: white 0 to purple {top:.2f} mm and above"
+            legend = (
+                f"largest error vs truth: white 0 to purple {top:.2f} mm and above; grey: no "
+                "truth (a hole of the actor's scan)"
+            )
             out[label] = (colour_map.colours(error_mm), legend)
     return out
 
@@ -293,6 +296,10 @@ def capture_tables(evaluated: dict[str, Any], simulated: dict[str, Any]) -> dict
             ])  # fmt: skip
     rows.append(["worst frame's relative displacement error", fidelity["fem"]["worst"],
                  fidelity["kinematic"]["worst"], ""])  # fmt: skip
+    if missing := evaluated.get("points_without_truth", {}).get("sample"):
+        rows.append(["sampled scan vertices with no true skin under them (holes of the actor's "
+                     "scan that the scan stage filled), left out of the errors above",
+                     missing, missing, ""])  # fmt: skip
     gaps = evaluated.get("lip_gap_mm", {})
     for peak in peaks:
         truth = gaps.get("truth", {}).get(peak)

@@ -58,3 +58,26 @@ def test_regions_and_lip_gap() -> None:
     assert names == ["mouth", "jaw_chin", "cheeks", "nose", "forehead"]
     up, low = np.zeros((3, 3)), np.array([[0, -0.006, 0], [0, -0.01, 0], [0, -0.002, 0.0]])
     np.testing.assert_allclose(lip_gap(up, low), [0.006, 0.01, 0.002])
+
+
+def test_points_in_a_hole_of_the_truth_have_no_truth() -> None:
+    """A model surface that fills a hole of the true surface: its points in the hole are as
+    far from the truth as from the hole's rim, and the rim's motion is not theirs."""
+    tv, tf = moving_sheet()
+    inside = np.abs(tv[0][:, :2] - [0.0, -0.02]).max(axis=1) < 0.005 + 1e-9
+    tf = tf[~inside[tf].all(axis=1)]  # a 10 mm square hole on the sheet's 2.5 mm grid
+    g = np.stack(np.meshgrid(np.linspace(-0.04, 0.04, 81), np.linspace(-0.04, 0.04, 81)), -1)
+    pts = np.c_[g.reshape(-1, 2), np.zeros(g.size // 2)]  # every 1 mm, over the hole too
+    tm = follow_truth(pts, tv, tf)
+    depth_in_hole = 0.005 - np.abs(pts[:, :2] - [0.0, -0.02]).max(axis=1)  # from its rim, m
+    np.testing.assert_allclose(tm.distance, np.maximum(depth_in_hole, 0.0), atol=1e-7)
+    on = tm.on_truth()  # within 1 mm of the true surface
+    assert on[depth_in_hole < 0.0009].all() and not on[depth_in_hole > 0.0011].any()
+    assert 49 <= (~on).sum() <= 81  # 7 x 7 points more than 1 mm inside the rim, 9 x 9 at 1 mm
+    # a model that moves the points in the hole wrongly is as good as the truth where it has one
+    model = tm.displacement.copy()
+    model[:, ~on] += [0.0, 0.0, 0.005]
+    assert relative_error(model, tm.displacement)[-1] > 0.05
+    np.testing.assert_allclose(
+        relative_error(model[:, on], tm.displacement[:, on])[1:], 0.0, atol=1e-12
+    )

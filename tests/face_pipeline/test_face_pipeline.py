@@ -136,7 +136,7 @@ def test_skull_holds_the_mandible_turns_and_the_actuation_moves_the_skin(demo_ru
 def test_the_simulated_face_performs_the_capture(demo_run) -> None:
     """Against the demo's ground truth, on the fixed coarse mesh (measured: the FEM mouth opens
     by 5.3 mm against the actor's 9.3 mm, as the 6 mm actuation patches span the 7 mm tets'
-    lips; relative displacement error 0.135 at the jaw drop and 0.111 at the smile; peak /
+    lips; relative displacement error 0.121 at the jaw drop and 0.100 at the smile; peak /
     99th-percentile stress 2.30; the moved scan's silhouette against the truth's, worst frame,
     front / side: FEM 0.992 / 0.987): the mouth opens by at least 45 % of the actor's, the
     errors stay within 0.06 of those figures, no hot spot, no flap or tear in the outline.
@@ -151,7 +151,7 @@ def test_the_simulated_face_performs_the_capture(demo_run) -> None:
     print(message, "surfaces", summary["surfaces"])
     assert opened["truth"] > 3.0, message  # the actor's mouth opens by millimetres
     assert opened["fem"] > 0.45 * opened["truth"], message
-    assert fidelity["jaw_open"]["overall"] < 0.20 and fidelity["smile"]["overall"] < 0.17, message
+    assert fidelity["jaw_open"]["overall"] < 0.18 and fidelity["smile"]["overall"] < 0.16, message
     stress = store.provenance("simulate", keys["simulate"])["summary"]["peak_to_p99_von_mises"]
     print("stress ratio", stress)
     assert stress <= 3.0, stress

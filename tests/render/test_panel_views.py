@@ -14,7 +14,7 @@ from matplotlib import colormaps
 from physanim.cameras import frontal_camera
 from physanim.evaluate.truth import Truth
 from physanim.pipeline import DatasetParams
-from physanim.render.colours import BACKGROUND, BAR_HEIGHT
+from physanim.render.colours import BACKGROUND, BAR_HEIGHT, NO_VALUE
 from physanim.render.face_panel import (
     FIT_TITLE,
     KINEMATIC_TITLE,
@@ -174,3 +174,16 @@ def test_error_colour_bar_spans_the_moving_skins_error() -> None:
     error[3, 999] = 100.0
     assert TileParams().error_colours(error).clim == (0.0, 5.0)
     assert TileParams(error_max_mm=2.0).error_colours(error).clim == (0.0, 2.0)
+
+
+def test_a_vertex_without_truth_is_grey_not_a_small_error() -> None:
+    """NaN errors (scan vertices with no true surface under them) neither set the bar's top
+    nor take a colour of the map: they are drawn in NO_VALUE's grey."""
+    error = np.zeros((20, 1000))
+    error[7, :100] = 5.0
+    error[:, 900:] = np.nan
+    colour_map = TileParams().error_colours(error)
+    assert colour_map.clim == (0.0, 5.0)
+    rgb = colour_map.colours(np.array([0.0, 5.0, np.nan]))
+    np.testing.assert_array_equal(rgb[2], np.round(255 * np.asarray(NO_VALUE)))
+    assert not (rgb[:2] == rgb[2]).all(axis=1).any()

@@ -97,16 +97,20 @@ def test_warnings_open_the_report(tmp_path):
 def test_the_capture_table_shows_the_simulated_facts_against_their_targets():
     """The report's physics rows read the simulate summary: the stress ratio, the tets turned
     inside out (in any frame, and at each peak from the evaluate summary) and the drive's
-    share of the skin, each beside its target."""
+    share of the skin, each beside its target; and how many sampled scan vertices the errors
+    leave out for want of a truth."""
     from physanim.render.run_report import capture_tables
 
     simulated = {"peak_to_p99_von_mises": 3.26, "inverted_tets": 60,
                  "spring_node_fraction_of_skin": 0.0}  # fmt: skip
     evaluated = {"fidelity": {"fem": {"worst": 0.2}, "kinematic": {"worst": 0.1}},
-                 "inverted_tets_at_peaks": {"jaw_open": 58, "smile": 0}}  # fmt: skip
+                 "inverted_tets_at_peaks": {"jaw_open": 58, "smile": 0},
+                 "points_without_truth": {"scan": 1640, "sample": 262}}  # fmt: skip
     ((_, rows),) = capture_tables(evaluated, simulated).values()
     by_name = {row[0]: (row[1], row[3]) for row in rows}
     assert by_name["tets turned inside out (in any frame)"] == (60, "0")
     assert by_name["tets turned inside out at the jaw_open peak"] == (58, "0")
     assert by_name["tets turned inside out at the smile peak"] == (0, "0")
     assert by_name["peak / 99th-percentile von Mises stress (worst frame)"] == (3.26, "<= 5")
+    (left_out,) = (row for row in rows if row[0].startswith("sampled scan vertices with no true"))
+    assert left_out[1:] == [262, 262, ""]
