@@ -39,6 +39,7 @@ from results import Table, describe, record  # benchmarks/results.py, beside thi
 from flows.dags import FACE
 from physanim.capture.library import DEMO, PERFORMANCE_NAMES, dataset_name
 from physanim.config import load_config
+from physanim.evaluate.face import EvaluateParams
 from physanim.evaluate.fidelity import (
     REGIONS,
     face_regions,
@@ -98,7 +99,8 @@ def measure(
 
     truth = load_truth(dataset / "ground_truth.zarr", T)
     true = follow_truth(vertices, truth.vertices, truth.faces)
-    on = true.on_truth()  # as evaluate: the scan's filled holes have no truth
+    # as evaluate: the scan's filled holes have no truth
+    on = true.on_truth(config.section("evaluate", EvaluateParams).truth_max_distance_m)
     true_u = true.displacement[:, on]
     labels = face_regions(vertices[on], align.landmark_positions())
     variants = {

@@ -227,23 +227,18 @@ def motion_tiles(
         return {k: v for name, f in futures.items() for k, v in _titled(name, f.result()).items()}
 
 
-def scan_error_mm(
-    scan_vertices: NDArray,
-    captured: NDArray,
-    truth: Truth,
-    max_distance_m: float | None = None,
-) -> NDArray:
+def scan_error_mm(scan_vertices: NDArray, captured: NDArray, truth: Truth) -> NDArray:
     """(R, N) mm per scan vertex and frame: the distance between its captured displacement
     (``captured`` (R, N, 3) m minus ``scan_vertices`` (N, 3) m) and its true one (the truth's
     surface point closest to it at the first frame, followed; ``truth`` the same R frames,
     the first the neutral one); NaN where the vertex has no truth (farther than
-    ``max_distance_m`` from the true surface, by default ``evaluate``'s: a filled hole of
+    ``evaluate``'s default ``truth_max_distance_m`` from the true surface: a filled hole of
     the scan)."""
-    from physanim.evaluate.fidelity import TRUTH_MAX_DISTANCE_M, follow_truth
+    from physanim.evaluate.fidelity import follow_truth
 
     true = follow_truth(scan_vertices, truth.vertices, truth.faces)
     error = 1e3 * np.linalg.norm(captured - scan_vertices - true.displacement, axis=-1)
-    return np.where(true.on_truth(max_distance_m or TRUTH_MAX_DISTANCE_M), error, np.nan)
+    return np.where(true.on_truth(), error, np.nan)
 
 
 def fem_tiles(
