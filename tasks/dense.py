@@ -139,6 +139,6 @@ def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[s
 SPEC = StageSpec.typed(
     "dense",
     compute,
-    version="8",
+    version="9",
     doc="captured motion of every scan vertex: dense capture (flow + depth) or the kinematic scan",
 )

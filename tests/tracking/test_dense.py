@@ -13,7 +13,16 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from physanim.tracking.dense import dense_track, flow_window, smooth_depth
+from physanim.tracking.dense import (
+    _enlarge,
+    _flow_engine,
+    _reduce,
+    dense_track,
+    dis_flow,
+    flow_image,
+    flow_window,
+    smooth_depth,
+)
 from physanim.tracking.dense_params import DEPTH_CHANGE_SIGMA_PX, DenseParams
 from physanim.tracking.lift import backproject
 
@@ -150,7 +159,11 @@ def test_each_frames_flow_starts_from_the_frame_befores_in_its_direction(recordi
             return out
 
     vertices = backproject(uv0, neutral_depth(uv0), K)
-    params = DenseParams(refine_head_pose=False, register_scan=False, temporal_sigma_s=0.0)
+    # one pass per call (the passes after the first start from the warped frame, not from
+    # frame t - 1: test_a_second_flow_pass_reads_what_the_first_leaves)
+    params = DenseParams(
+        refine_head_pose=False, register_scan=False, temporal_sigma_s=0.0, flow_passes=1
+    )
     pose = np.tile(np.eye(4), (T, 1, 1))
     runs = {}
     for cold in (False, True):
@@ -167,6 +180,43 @@ def test_each_frames_flow_starts_from_the_frame_befores_in_its_direction(recordi
         for t in range(T)
     ]  # fmt: skip
     assert np.median(apart) < 0.05
+
+
+def test_a_second_flow_pass_reads_what_the_first_leaves():
+    """On faint texture (blurred noise of 5 grey levels, as skin's pores and mottling) a
+    bump of motion 6 px wide and 2 px high (a lip press at the demo camera's scale) is read
+    short by one DIS pass; the second pass, from the target warped back by the first's flow,
+    reads most of what is left. Mean over 4 textures of the share of the motion not read
+    (1 - the flow's component along the true motion over the true motion's, where the bump
+    is above a fifth of its height): measured 0.036 with one pass, 0.016 with two."""
+    params = DenseParams()
+    n, sigma, height = 160, 6.0, 2.0
+    ys, xs = np.mgrid[0:n, 0:n].astype(np.float32)
+    bump = np.exp(-((xs - n / 2) ** 2 + (ys - n / 2) ** 2) / (2 * sigma**2))
+    motion = np.stack([0.3 * height * bump, height * bump], -1).astype(np.float32)
+    # the target's pixel x shows the source's pixel x0 with x0 + motion(x0) = x
+    x0, y0 = xs.copy(), ys.copy()
+    for _ in range(10):
+        at = cv2.remap(motion, x0, y0, cv2.INTER_LINEAR)
+        x0, y0 = xs - at[..., 0], ys - at[..., 1]
+    moving = bump > 0.2
+    short = {1: [], 2: []}
+    for seed in range(4):
+        noise = cv2.GaussianBlur(
+            np.random.default_rng(seed).normal(size=(n, n)).astype(np.float32), (0, 0), 1.2
+        )
+        texture = 128.0 + 5.0 * noise / noise.std()
+        source = texture.astype(np.uint8)
+        target = np.clip(cv2.remap(texture, x0, y0, cv2.INTER_CUBIC), 0, 255).astype(np.uint8)
+        a, b = (_enlarge(flow_image(g, params.flow_normalise_px), params) for g in (source, target))
+        for passes in short:
+            flow = _reduce(dis_flow(_flow_engine(params), a, b, None, passes, 3.0), (n, n), params)
+            along = (flow[moving] * motion[moving]).sum() / (motion[moving] ** 2).sum()
+            short[passes].append(1.0 - along)
+    one, two = np.mean(short[1]), np.mean(short[2])
+    print(f"share of the motion not read: one pass {one:.3f}, two passes {two:.3f}")
+    assert one > 0.02  # the shortfall exists
+    assert abs(two) < 0.6 * one
 
 
 def _pixels(points: NDArray) -> NDArray:
