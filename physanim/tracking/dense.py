@@ -223,8 +223,8 @@ def dis_flow(
     lips with the skin at rest, and its fine patches find too little texture to correct
     them), the next pass starts from a nearly aligned pair and reads most of the rest. What
     is left is small where the first pass held; where a later pass finds more than
-    ``max_left_px`` (the warped target's replicated border, the inside of an opening mouth)
-    it has lost the match, and the flow so far stands."""
+    ``max_left_px`` it has lost the match (left in, such remainders made medley-s0's
+    flows disagree forward and backward by up to 3.6e5 px), and the flow so far stands."""
     flow = engine.calc(source, target, start)
     if passes == 1:
         return flow
