@@ -24,7 +24,7 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    averaged back to the camera's pixels: finer patches blur the skin's motion less where it
    changes fast (the library's RGB-D peaks: mean 0.114 -> 0.110 on the performances it was
    chosen on, 0.117 -> 0.113 on the held-out ones). Each flow runs in two passes
-   (``flow_passes``, :func:`dis_flow`): one DIS pass read 9-13 % too little of a lip
+   (``flow_passes``, :func:`dis_flow`): one DIS pass read 8-10 % too little of a lip
    press's motion on the skin's faint texture; the second, from the frame warped back by
    the first, reads most of the rest (the RGB-D peaks: mean 0.0715 -> 0.0673 on the
    performances it was chosen on, 0.0724 -> 0.0695 on the held-out ones). The vertex's pixel at t

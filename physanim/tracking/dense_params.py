@@ -74,7 +74,7 @@ class DenseParams(BaseModel):
         2, ge=1, le=4,
         description="DIS flow passes: each after the first matches the neutral image against "
         "the frame warped back by the flow so far and adds what is left; one pass reads "
-        "9-13 % too little of a lip press's motion on the faint texture of skin; count",
+        "8-10 % too little of a lip press's motion on the faint texture of skin; count",
     )  # fmt: skip
     flow_two_way: bool = Field(
         True,
