@@ -81,6 +81,11 @@ def compute(
         depth_change_sigma_px=params.depth_change_sigma_px,
         unfolded_vertex_frames=dense.unfolded,
     )
+    if dense.pose_correction_deg is not None:
+        summary["pose_correction_deg_median"] = round(
+            float(np.median(dense.pose_correction_deg)), 4
+        )
+        summary["pose_correction_deg_max"] = round(float(dense.pose_correction_deg.max()), 4)
     parts = []
     if params.rest_factor > 0:
         parts.append(_neutral_summary(dense.neutral))
@@ -139,6 +144,6 @@ def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[s
 SPEC = StageSpec.typed(
     "dense",
     compute,
-    version="9",
+    version="10",
     doc="captured motion of every scan vertex: dense capture (flow + depth) or the kinematic scan",
 )

@@ -55,6 +55,11 @@ accumulate (Beeler et al. 2011 track against anchor frames for the same reason):
    own; their mean over its rest frames is subtracted from every frame (the library's RGB-D
    peaks: mean 0.091 -> 0.084 on the performances it was chosen on, 0.093 -> 0.084 on the
    held-out ones).
+   Then each frame's head pose is corrected by the skin that rests in it
+   (:func:`rest_pose`): step 4 weighs a point by how rigidly it rides with the head over the
+   whole sequence, so an expression that moves much of the face tilts that frame's pose by a
+   few hundredths of a degree (the library's RGB-D peaks: mean 0.0673 -> 0.0668 on the
+   performances it was chosen on, 0.0695 -> 0.0649 on the held-out ones).
 6. **Fill and smooth.** Per frame, the displacement field u minimises
    ``sum_i c_i |u_i - u_obs_i|^2 + lam * sum_edges |(u_i - u_j) - w_ij (p_i - p_j)|^2`` over
    the (lip-cut) scan graph, c_i = 1 where observed, p the prior (the kinematic scan's
@@ -98,6 +103,10 @@ from physanim.tracking.tracks import head_poses, refine_poses_anisotropic
 
 #: About how many of the seen vertices (every k-th) re-estimate the head pose.
 POSE_POINTS = 3000
+#: Fewest resting vertices from which :func:`rest_pose` corrects a frame's head pose.
+POSE_REST_POINTS = 100
+#: Most passes of :func:`rest_pose` (each finds the rest in the motion the one before corrected).
+POSE_REST_PASSES = 3
 #: Least local standard deviation (8-bit levels) that :func:`flow_image` divides by: flat,
 #: dark places (the open mouth's shadow) would otherwise become amplified sensor noise
 #: (with 2 levels and 8 px, the flow of jaw_side-s0 lost a lip corner for five frames).
@@ -128,7 +137,9 @@ class DenseMotion:
     vertices; ``seconds_per_frame`` wall time of the flow, lifting and filling per frame;
     ``neutral`` the neutral frame's error taken out (:func:`without_neutral_error`);
     ``registration`` of the scan to the neutral depth (None when not asked for);
-    ``unfolded`` how many (frame, vertex) pairs :func:`unfold_unseen` filled anew.
+    ``unfolded`` how many (frame, vertex) pairs :func:`unfold_unseen` filled anew;
+    ``pose_correction_deg`` (T,) the angle by which :func:`rest_pose` turned each frame's
+    head pose (degrees; None when not asked for).
     """
 
     displacement: NDArray
@@ -140,6 +151,7 @@ class DenseMotion:
     neutral: NeutralError
     registration: Registration | None = None
     unfolded: int = 0
+    pose_correction_deg: NDArray | None = None
 
 
 def smooth_depth(depth: NDArray, sigma_px: float) -> NDArray:
@@ -520,6 +532,37 @@ def observe(
     )  # fmt: skip
 
 
+def _resting(
+    obs: DenseObservations,
+    faces: NDArray,
+    params: DenseParams,
+    edge_m: float,
+    fps: float,
+    factor: float,
+) -> NDArray:
+    """(T - 1, S) bool: where each seen vertex rests in frames 1.. (:func:`neutral_error`'s
+    rule at ``factor`` times the smoothed motion's noise)."""
+    T, S = obs.displacement.shape[:2]
+    observed = np.isfinite(obs.displacement).all(axis=2)[1:]  # (T - 1, S)
+    from physanim.fem.linsolve import factorize_many
+
+    values = np.where(observed[..., None], obs.displacement[1:], 0.0)
+    lam = (params.rest_smoothing_m / edge_m) ** 2
+    smoother = sp.identity(S) + lam * _induced_laplacian(faces, obs.seen)
+    columns = np.concatenate([values.transpose(1, 0, 2).reshape(S, -1), observed.T], axis=1)
+    smooth = factorize_many(sp.csc_matrix(smoother))(columns.astype(np.float64))
+    share = np.maximum(smooth[:, 3 * (T - 1) :], 1e-6)  # (S, T - 1)
+    local = smooth[:, : 3 * (T - 1)].reshape(S, T - 1, 3) / share[..., None]
+    motion = np.linalg.norm(polynomial_in_time(local.transpose(1, 0, 2), 1.0, 0), axis=2)
+    both = observed[2:] & observed[1:-1] & observed[:-2]
+    second = np.linalg.norm(local[:, 2:] - 2 * local[:, 1:-1] + local[:, :-2], axis=2).T
+    # the motion's own second differences are small at camera frame rates
+    noise = np.median(second[both]) / np.sqrt(6.0) if both.any() else 0.0
+    still = motion < factor * noise
+    margin = int(round(params.rest_margin_s * fps))
+    return observed & minimum_filter1d(still, 2 * margin + 1, axis=0, mode="nearest")
+
+
 def neutral_error(
     obs: DenseObservations, faces: NDArray, params: DenseParams, edge_m: float, fps: float
 ) -> tuple[NDArray, NDArray]:
@@ -538,29 +581,13 @@ def neutral_error(
     error plus that frame's own, so their mean over its rest frames estimates the shared
     one; a vertex with no rest frame gets 0. ``edge_m`` the scan's median edge length (m),
     ``fps`` the frame rate (1/s)."""
-    T, S = obs.displacement.shape[:2]
-    observed = np.isfinite(obs.displacement).all(axis=2)[1:]  # (T - 1, S)
-    if params.rest_factor <= 0.0 or not observed.any():
+    S = obs.displacement.shape[1]
+    if params.rest_factor <= 0.0 or not np.isfinite(obs.displacement[1:]).all(axis=2).any():
         return np.zeros((S, 3)), np.zeros(S, dtype=np.int64)
-    from physanim.fem.linsolve import factorize_many
-
-    values = np.where(observed[..., None], obs.displacement[1:], 0.0)
-    lam = (params.rest_smoothing_m / edge_m) ** 2
-    smoother = sp.identity(S) + lam * _induced_laplacian(faces, obs.seen)
-    columns = np.concatenate([values.transpose(1, 0, 2).reshape(S, -1), observed.T], axis=1)
-    smooth = factorize_many(sp.csc_matrix(smoother))(columns.astype(np.float64))
-    share = np.maximum(smooth[:, 3 * (T - 1) :], 1e-6)  # (S, T - 1)
-    local = smooth[:, : 3 * (T - 1)].reshape(S, T - 1, 3) / share[..., None]
-    motion = np.linalg.norm(polynomial_in_time(local.transpose(1, 0, 2), 1.0, 0), axis=2)
-    both = observed[2:] & observed[1:-1] & observed[:-2]
-    second = np.linalg.norm(local[:, 2:] - 2 * local[:, 1:-1] + local[:, :-2], axis=2).T
-    # the motion's own second differences are small at camera frame rates
-    noise = np.median(second[both]) / np.sqrt(6.0) if both.any() else 0.0
-    still = motion < params.rest_factor * noise
-    margin = int(round(params.rest_margin_s * fps))
-    rest = observed & minimum_filter1d(still, 2 * margin + 1, axis=0, mode="nearest")
+    rest = _resting(obs, faces, params, edge_m, fps, params.rest_factor)
+    values = np.where(rest[..., None], obs.displacement[1:], 0.0)
     count = rest.sum(axis=0)
-    total = (values * rest[..., None]).sum(axis=0)
+    total = values.sum(axis=0)
     return np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], 0.0), count
 
 
@@ -577,6 +604,65 @@ def without_neutral_error(
     rms = float(np.sqrt((shared[rests] ** 2).sum(axis=1).mean())) if rests.any() else 0.0
     resting = float(rests.mean()) if len(rests) else 0.0
     return replace(obs, displacement=motion), NeutralError(rms, resting)
+
+
+def rest_pose(
+    obs: DenseObservations, vertices: NDArray, faces: NDArray, params: DenseParams, *, fps: float
+) -> tuple[DenseObservations, NDArray]:
+    """The observations with each frame's head pose corrected by the skin that rests in it,
+    and the correction's angle (T,) in degrees (0 where not corrected).
+
+    The head pose of step 4 weighs every point by how rigidly it rides with the head over
+    the whole sequence, so a frame whose expression moves much of the face tilts it a
+    little: 0.04-0.09 degrees at the demo's smile and emotions-s0's nose wrinkle (from the
+    truth), which moves the chin 0.1-0.2 mm. Per frame, the vertices at rest there
+    (:func:`neutral_error`'s rule at the stricter ``pose_rest_factor``, applied to the
+    motion with the neutral frame's error taken out) should not move: the rigid motion that
+    best carries their neutral positions to their observed ones (Kabsch, at least
+    ``POSE_REST_POINTS`` of them) is the pose's error and is taken out of every seen vertex's
+    motion and folded into ``head_pose``. ``vertices`` (N, 3) m / ``faces`` (F, 3) the scan,
+    ``fps`` the frame rate (1/s)."""
+    T = obs.displacement.shape[0]
+    angles = np.zeros(T)
+    if params.pose_rest_factor <= 0.0 or T < 2:
+        return obs, angles
+    points = vertices[obs.seen]
+    edge = _edge_length(vertices, faces)
+    motion, poses = obs.displacement, obs.head_pose
+    rest = np.zeros((T - 1, len(points)), dtype=bool)
+    for _ in range(POSE_REST_PASSES):
+        # a tilt lifts the skin far from its axis above the rest threshold: each pass finds
+        # the rest in the motion the pass before corrected
+        found = _resting(
+            replace(obs, displacement=motion), faces, params, edge, fps, params.pose_rest_factor
+        )
+        if (found == rest).all():
+            break
+        rest = found
+        motion = np.array(obs.displacement, dtype=np.float64)
+        poses = np.array(obs.head_pose, dtype=np.float64)
+        for t in range(1, T):
+            use = rest[t - 1]
+            if use.sum() < POSE_REST_POINTS:
+                continue
+            rot, shift = _kabsch(points[use], points[use] + motion[t, use])
+            # observed x = rot p' + shift for the corrected p': p' = rot^T (x - shift)
+            motion[t] = (points + motion[t] - shift) @ rot - points
+            correction = np.eye(4)
+            correction[:3, :3], correction[:3, 3] = rot, shift
+            poses[t] = poses[t] @ correction
+            angles[t] = np.degrees(np.arccos(np.clip((np.trace(rot) - 1.0) / 2.0, -1.0, 1.0)))
+    return replace(obs, displacement=motion, head_pose=poses), angles
+
+
+def _kabsch(source: NDArray, target: NDArray) -> tuple[NDArray, NDArray]:
+    """Rotation (3, 3) and translation (3,) that best carry ``source`` (K, 3) onto
+    ``target`` (K, 3) (least squares)."""
+    cs, ct = source.mean(axis=0), target.mean(axis=0)
+    u, _, vt = np.linalg.svd((source - cs).T @ (target - ct))
+    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    rot = vt.T @ flip @ u.T
+    return rot, ct - rot @ cs
 
 
 def fill_motion(
@@ -695,11 +781,12 @@ def dense_track(
     *,
     fps: float,
 ) -> DenseMotion:
-    """Dense motion of the scan: :func:`observe`, :func:`without_neutral_error`, then
-    :func:`fill_motion` (arguments there)."""
+    """Dense motion of the scan: :func:`observe`, :func:`without_neutral_error`,
+    :func:`rest_pose`, then :func:`fill_motion` (arguments there)."""
     obs = observe(color, depth, K, head_pose, vertices, faces, params, progress)
     start = time.perf_counter()
     obs, neutral = without_neutral_error(obs, vertices, faces, params, fps=fps)
+    obs, turned = rest_pose(obs, vertices, faces, params, fps=fps)
     displacement, confidence, unfolded = fill_motion(obs, vertices, faces, params, prior, fps=fps)
     with np.errstate(invalid="ignore"):
         flow_error = np.nanmedian(obs.flow_error_px, axis=1)
@@ -707,4 +794,5 @@ def dense_track(
     return DenseMotion(
         displacement, confidence, obs.head_pose, obs.seen, flow_error, seconds / color.shape[0],
         neutral, obs.registration, unfolded,
+        turned if params.pose_rest_factor > 0 else None,
     )  # fmt: skip

@@ -141,6 +141,12 @@ class DenseParams(BaseModel):
         description="length over which the observed motion is smoothed on the scan to tell "
         "rest from motion (rest_factor); m",
     )  # fmt: skip
+    pose_rest_factor: float = Field(
+        2.0, ge=0.0, le=100.0,
+        description="each frame's head pose is corrected by the rigid motion of the seen "
+        "vertices that rest there by the rule of rest_factor at this stricter factor, "
+        "after the neutral frame's error is taken out (0: off); 1",
+    )  # fmt: skip
     fill_iterations: int = Field(
         2, ge=1, le=20,
         description="fill passes: each smooths the kept observations and drops those "
