@@ -100,6 +100,7 @@ from physanim.tracking.lift import backproject, sample
 from physanim.tracking.local_fit import local_polynomial, polynomial_in_time
 from physanim.tracking.register import Registration, register_to_depth
 from physanim.tracking.tracks import head_poses, refine_poses_anisotropic
+from physanim.transforms import fit_transform
 
 #: About how many of the seen vertices (every k-th) re-estimate the head pose.
 POSE_POINTS = 3000
@@ -641,11 +642,13 @@ def rest_pose(
         rest = found
         motion = np.array(obs.displacement, dtype=np.float64)
         poses = np.array(obs.head_pose, dtype=np.float64)
+        angles = np.zeros(T)
         for t in range(1, T):
             use = rest[t - 1]
             if use.sum() < POSE_REST_POINTS:
                 continue
-            rot, shift = _kabsch(points[use], points[use] + motion[t, use])
+            fit = fit_transform(points[use], points[use] + motion[t, use], with_scale=False)
+            rot, shift = fit.rotation, fit.translation
             # observed x = rot p' + shift for the corrected p': p' = rot^T (x - shift)
             motion[t] = (points + motion[t] - shift) @ rot - points
             correction = np.eye(4)
@@ -653,16 +656,6 @@ def rest_pose(
             poses[t] = poses[t] @ correction
             angles[t] = np.degrees(np.arccos(np.clip((np.trace(rot) - 1.0) / 2.0, -1.0, 1.0)))
     return replace(obs, displacement=motion, head_pose=poses), angles
-
-
-def _kabsch(source: NDArray, target: NDArray) -> tuple[NDArray, NDArray]:
-    """Rotation (3, 3) and translation (3,) that best carry ``source`` (K, 3) onto
-    ``target`` (K, 3) (least squares)."""
-    cs, ct = source.mean(axis=0), target.mean(axis=0)
-    u, _, vt = np.linalg.svd((source - cs).T @ (target - ct))
-    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
-    rot = vt.T @ flip @ u.T
-    return rot, ct - rot @ cs
 
 
 def fill_motion(
