@@ -106,6 +106,10 @@ from physanim.transforms import fit_transform
 POSE_POINTS = 3000
 #: Fewest resting vertices from which :func:`rest_pose` corrects a frame's head pose.
 POSE_REST_POINTS = 100
+#: Least spread (m, the resting points' second principal standard deviation) from which
+#: :func:`rest_pose` corrects a frame's pose: a narrow strip fixes a rotation about its own
+#: axis poorly. The library's frames rest over 14-22 mm.
+POSE_REST_SPREAD_M = 0.005
 #: Most passes of :func:`rest_pose` (each finds the rest in the motion the one before corrected).
 POSE_REST_PASSES = 3
 #: Least local standard deviation (8-bit levels) that :func:`flow_image` divides by: flat,
@@ -620,9 +624,9 @@ def rest_pose(
     (:func:`neutral_error`'s rule at the stricter ``pose_rest_factor``, applied to the
     motion with the neutral frame's error taken out) should not move: the rigid motion that
     best carries their neutral positions to their observed ones (Kabsch, at least
-    ``POSE_REST_POINTS`` of them) is the pose's error and is taken out of every seen vertex's
-    motion and folded into ``head_pose``. ``vertices`` (N, 3) m / ``faces`` (F, 3) the scan,
-    ``fps`` the frame rate (1/s)."""
+    ``POSE_REST_POINTS`` of them spread over ``POSE_REST_SPREAD_M``) is the pose's error and
+    is taken out of every seen vertex's motion and folded into ``head_pose``. ``vertices``
+    (N, 3) m / ``faces`` (F, 3) the scan, ``fps`` the frame rate (1/s)."""
     T = obs.displacement.shape[0]
     angles = np.zeros(T)
     if params.pose_rest_factor <= 0.0 or T < 2:
@@ -645,7 +649,7 @@ def rest_pose(
         angles = np.zeros(T)
         for t in range(1, T):
             use = rest[t - 1]
-            if use.sum() < POSE_REST_POINTS:
+            if use.sum() < POSE_REST_POINTS or _spread(points[use]) < POSE_REST_SPREAD_M:
                 continue
             fit = fit_transform(points[use], points[use] + motion[t, use], with_scale=False)
             rot, shift = fit.rotation, fit.translation
@@ -656,6 +660,11 @@ def rest_pose(
             poses[t] = poses[t] @ correction
             angles[t] = np.degrees(np.arccos(np.clip((np.trace(rot) - 1.0) / 2.0, -1.0, 1.0)))
     return replace(obs, displacement=motion, head_pose=poses), angles
+
+
+def _spread(points: NDArray) -> float:
+    """The second principal standard deviation (m) of ``points`` (K, 3) m."""
+    return float(np.sqrt(max(np.linalg.eigvalsh(np.cov(points.T))[1], 0.0)))
 
 
 def fill_motion(
