@@ -59,6 +59,11 @@ def fit_transform(
     return Transform(scale=scale, rotation=rot, translation=mu_t - scale * rot @ mu_s)
 
 
+def rotation_angle_deg(rotation: np.ndarray) -> float:
+    """The angle (degrees) by which the rotation matrix ``rotation`` (3, 3) turns."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0))))
+
+
 def cross_matrices(v: np.ndarray) -> np.ndarray:
     """(n, 3, 3) matrices [v]x with [v]x u = v x u, of vectors ``v`` (n, 3). A small rotation
     omega moves a point p by omega x p = -[p]x omega: -[p]x is the rotation's Jacobian."""

@@ -16,6 +16,7 @@ import numpy as np
 
 from physanim.pipeline import StageContext, StageOutput, StageSpec
 from physanim.tracking.dense_params import DenseParams
+from physanim.transforms import rotation_angle_deg
 from tasks.align import AlignOutput
 from tasks.ingest import IngestOutput
 from tasks.track import TrackOutput
@@ -125,7 +126,7 @@ def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[s
     ``tracker_pose`` (4, 4) (mm, degrees), the registration's RMS residual (mm) and, when it
     was not applied, a warning."""
     change = np.linalg.inv(tracker_pose) @ reg.pose
-    turn = np.degrees(np.arccos(np.clip((np.trace(change[:3, :3]) - 1) / 2, -1.0, 1.0)))
+    turn = rotation_angle_deg(change[:3, :3])
     out: dict[str, object] = dict(
         registration_shift_mm=round(float(np.linalg.norm(change[:3, 3])) * 1e3, 3),
         registration_turn_deg=round(float(turn), 3),

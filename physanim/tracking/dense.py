@@ -100,7 +100,7 @@ from physanim.tracking.lift import backproject, sample
 from physanim.tracking.local_fit import local_polynomial, polynomial_in_time
 from physanim.tracking.register import Registration, register_to_depth
 from physanim.tracking.tracks import head_poses, refine_poses_anisotropic
-from physanim.transforms import fit_transform
+from physanim.transforms import fit_transform, rotation_angle_deg
 
 #: About how many of the seen vertices (every k-th) re-estimate the head pose.
 POSE_POINTS = 3000
@@ -658,7 +658,7 @@ def rest_pose(
             correction = np.eye(4)
             correction[:3, :3], correction[:3, 3] = rot, shift
             poses[t] = poses[t] @ correction
-            angles[t] = np.degrees(np.arccos(np.clip((np.trace(rot) - 1.0) / 2.0, -1.0, 1.0)))
+            angles[t] = rotation_angle_deg(rot)
     return replace(obs, displacement=motion, head_pose=poses), angles
 
 
