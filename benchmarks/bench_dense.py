@@ -92,7 +92,7 @@ def measure(
     t0 = time.perf_counter()
     dense = dense_track(
         ingest.color, ingest.depth, ingest.K, track.head_pose, vertices, align.scan_faces,
-        params, kinematic - vertices[None], fps=float(ingest.fps),
+        params, kinematic - vertices[None], right=ingest.stereo, fps=float(ingest.fps),
     )  # fmt: skip
     dense_s = (time.perf_counter() - t0) / T
     print(f"{label}: landmark tracker {track_s:.3f} s/frame; dense {dense_s:.3f} s/frame")

@@ -69,7 +69,7 @@ def compute(
     prior = kinematic - vertices[None] if params.prior == "kinematic" else None
     dense = dense_track(
         ingest.color, ingest.depth, ingest.K, track.head_pose, vertices, align.scan_faces,
-        params, prior, ctx.progress("dense"), fps=float(ingest.fps),
+        params, prior, ctx.progress("dense"), ingest.stereo, fps=float(ingest.fps),
     )  # fmt: skip
     observed = dense.confidence.mean(axis=1)
     summary = dict(
@@ -145,6 +145,6 @@ def _registration_summary(reg: Registration, tracker_pose: np.ndarray) -> dict[s
 SPEC = StageSpec.typed(
     "dense",
     compute,
-    version="10",
+    version="11",
     doc="captured motion of every scan vertex: dense capture (flow + depth) or the kinematic scan",
 )

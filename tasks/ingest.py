@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physanim.capture.frames import StereoRight
 from physanim.capture.params import IngestParams
 from physanim.pipeline import (
     DatasetParams,
@@ -32,7 +33,8 @@ class IngestOutput(StageOutput):
     stereo); ``timestamps`` (T,) s; ``frame_index`` (T,) on the recording's grid; ``fps``
     frames/s; ``valid_fraction`` (T,); ``depth_median`` (T,) m; the frame-grid findings
     (``dropped``, ``duplicated``, ``recovered``, ``implausible_depth``), ``warnings``, the
-    source ``kind``/``origin`` and the ``source`` reader.
+    source ``kind``/``origin``, the ``source`` reader and a stereo pair's right images
+    (``stereo``, None for depth frames).
     """
 
     color: np.ndarray = field(metadata={"lazy": True})
@@ -52,6 +54,7 @@ class IngestOutput(StageOutput):
     implausible_depth: list[int]
     kind: str
     origin: str
+    stereo: StereoRight | None = None
 
 
 def fingerprint(dataset: DatasetParams, params: IngestParams) -> Mapping[str, object]:
@@ -90,7 +93,7 @@ def compute(params: IngestParams, ctx: StageContext[IngestParams]) -> IngestOutp
 SPEC = StageSpec.typed(
     "ingest",
     compute,
-    version="3",
+    version="4",
     doc="RealSense bag / Open3D RGBD folder / stereo pair -> colour, metric depth, intrinsics",
     fingerprint=fingerprint,
 )

@@ -19,7 +19,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from physanim.capture.frames import Capture, CaptureError, check_gaps, depth_to_metres
+from physanim.capture.frames import (
+    Capture,
+    CaptureError,
+    StereoRight,
+    check_gaps,
+    depth_to_metres,
+)
 from physanim.capture.image_file import image_damage
 from physanim.capture.intrinsics import FORMS, frame_rate, parse_intrinsics, positive_number
 from physanim.capture.params import IngestParams
@@ -216,6 +222,7 @@ def read_stereo_folder(
     matcher = StereoDepth(calib, params, root / "calibration.yaml")
     h, w = matcher.size
     color = np.empty((len(idx), h, w, 3), np.uint8)
+    right_color = np.empty_like(color)
     depth = np.empty((len(idx), h, w), np.float32)
     limits = np.zeros((len(idx), 2))
     formats = ColorFormats()
@@ -228,7 +235,7 @@ def read_stereo_folder(
         )
         if i == 0:
             _check_orientation(matcher, *matcher.rectified(left, right), root)
-        color[i], depth[i], limits[i] = matcher.compute(left, right, lefts[n])
+        color[i], right_color[i], depth[i], limits[i] = matcher.compute(left, right, lefts[n])
         if progress is not None:
             progress(i + 1, len(idx))
     formats.finish()
@@ -256,6 +263,7 @@ def read_stereo_folder(
         ),
         dropped=missing,
         warnings=warnings,
+        stereo=StereoRight(right_color, matcher.K[0, 0] * matcher.baseline, matcher.doffs),
     )
 
 

@@ -25,6 +25,18 @@ class Problem:
     message: str
 
 
+@dataclass(frozen=True)
+class StereoRight:
+    """The right image of a rectified stereo pair beside ``Capture.color`` (the left):
+    ``color`` (T, H, W, 3) uint8 RGB, row-aligned with the left image; a point at depth z m
+    seen at column x of the left image sits at column ``x - (fx_baseline / z - doffs)`` of the
+    right one (``fx_baseline`` = f_x * B, px m; ``doffs`` px, the principal points' offset)."""
+
+    color: np.ndarray = field(metadata={"lazy": True})
+    fx_baseline: float
+    doffs: float
+
+
 @dataclass
 class Capture:
     """An ingested RGB-D recording.
@@ -40,7 +52,8 @@ class Capture:
     that were read from the file directly; ``warnings`` one line each (doubtful input);
     ``implausible_depth`` frame numbers whose depth cannot be of surfaces (a damaged file,
     ``physanim.capture.validate``); ``kind`` the source type (bag, rgbd, stereo) and
-    ``origin`` the file or folder read.
+    ``origin`` the file or folder read; ``stereo`` the right images of a stereo pair (None
+    for depth frames).
     """
 
     color: np.ndarray
@@ -60,6 +73,7 @@ class Capture:
     implausible_depth: list[int] = field(default_factory=list)
     kind: str = ""
     origin: str = ""
+    stereo: StereoRight | None = None
 
     def __post_init__(self) -> None:
         self.update_stats()

@@ -357,9 +357,9 @@ class StereoDepth(StereoRig):
 
     def compute(
         self, left: np.ndarray, right: np.ndarray, where: Path
-    ) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
-        """(rectified left RGB (H, W, 3) uint8, depth (H, W) float32 m with NaN invalid,
-        ``at_limits`` of the disparities)."""
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, float]]:
+        """(rectified left and right RGB (H, W, 3) uint8, depth (H, W) float32 m with NaN
+        invalid, ``at_limits`` of the disparities)."""
         if left.shape[:2] != self.size:
             raise CaptureError(
                 f"{where}: image is {left.shape[1]}x{left.shape[0]} but {self.where} gives "
@@ -368,4 +368,4 @@ class StereoDepth(StereoRig):
             )
         left, right = self.rectified(left, right)
         disp = self.disparity(left, right)
-        return left, self.depth(disp), self.at_limits(disp)
+        return left, right, self.depth(disp), self.at_limits(disp)

@@ -99,6 +99,19 @@ class DenseParams(BaseModel):
         "4.5 from depth frames (a bag, an RGBD folder), 6.5 from a stereo pair, whose depth "
         "is noisier; px",
     )  # fmt: skip
+    stereo_flow_weight: float = Field(
+        1 / 3, ge=0.0, le=1.0,
+        description="from a stereo pair the change of depth is also read from the change of "
+        "disparity between the left and the right image's flows, which follow the same skin "
+        "in both images; it gets this weight, the matched (SGBM) depth's change the rest "
+        "(their errors have other sources; 0: the matched depth only); 1",
+    )  # fmt: skip
+    stereo_row_tolerance_px: float = Field(
+        0.5, gt=0.0, le=10.0,
+        description="the right image's flow (stereo_flow_weight) is used only where its "
+        "vertical motion agrees with the left image's within this: the rectified pair's "
+        "rows are shared, so a disagreement is the flows' own error; px",
+    )  # fmt: skip
     visible_tolerance_m: float = Field(
         0.004, gt=0.0, le=0.05,
         description="a vertex is seen in the neutral frame when its depth is this close to "
