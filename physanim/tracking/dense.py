@@ -499,7 +499,7 @@ def observe(
     params = params.for_source("rgbd")  # leaves a set depth_change_sigma_px as it is
     T = color.shape[0]
     start = time.perf_counter()
-    gray0 = cv2.cvtColor(np.asarray(color[0]), cv2.COLOR_RGB2GRAY)
+    shape = tuple(color.shape[1:3])  # (H, W) px
     depth0 = smooth_depth(np.asarray(depth[0], dtype=np.float32), params.depth_sigma_px)
     head_pose = np.asarray(head_pose, dtype=np.float64)
     registration = None
@@ -520,15 +520,13 @@ def observe(
         )
     # the flow is computed in the window the face can reach (a face fills a fifth of a
     # 640 x 480 frame: 8x less work than the whole frame, and no background to match)
-    x0, y0, x1, y1 = flow_window(
-        vertices[view.seen], head_pose, K, gray0.shape, params.flow_margin_px
-    )
+    x0, y0, x1, y1 = flow_window(vertices[view.seen], head_pose, K, shape, params.flow_margin_px)
     shift = None
     if right is not None and params.stereo_flow_weight > 0:
         # the right image's window: the left one moved by the neutral's disparities
         disparity = right.fx_baseline / view.z - right.doffs
         rx0 = int(np.clip(x0 - np.ceil(disparity.max()) - STEREO_MARGIN_PX, 0, x1))
-        rx1 = int(np.clip(x1 - np.floor(disparity.min()) + STEREO_MARGIN_PX, rx0, gray0.shape[1]))
+        rx1 = int(np.clip(x1 - np.floor(disparity.min()) + STEREO_MARGIN_PX, rx0, shape[1]))
         shift = rx0 - x0
 
     def flow_input(image: NDArray, a: int, b: int) -> NDArray:
